@@ -1,0 +1,332 @@
+"""Typed samples (into the core) and outputs (out of it).
+
+Conventions (see DESIGN.md):
+
+* SI units and radians everywhere; every name carries frame and unit
+  (``acc_b_mps2`` is specific force in the body frame, ``vel_ned_mps`` velocity
+  in the local North-East-Down frame).
+* ``t_s`` is the one estimation clock: the autopilot's own time since its boot,
+  reconstructed by :mod:`companion.mavlink.decode` (wrap, epoch-stamped GNSS and
+  reboots handled there). ``t_rx_s`` is when the message was received (wall time
+  live, log time in a replay): for latency figures only, never for estimation.
+* Vectors are 1-D ``numpy`` arrays of float64, never (n, 1) columns.
+* Every dataclass is frozen and slotted: a sample is a fact, not a workspace.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+class FixType(enum.IntEnum):
+    """GNSS fix type as MAVLink's GPS_FIX_TYPE."""
+
+    NO_GPS = 0
+    NO_FIX = 1
+    FIX_2D = 2
+    FIX_3D = 3
+    DGPS = 4
+    RTK_FLOAT = 5
+    RTK_FIXED = 6
+    STATIC = 7
+    PPP = 8
+
+
+class LandedState(enum.IntEnum):
+    """MAV_LANDED_STATE from EXTENDED_SYS_STATE."""
+
+    UNDEFINED = 0
+    ON_GROUND = 1
+    IN_AIR = 2
+    TAKEOFF = 3
+    LANDING = 4
+
+
+class AutopilotFlavour(enum.Enum):
+    """Which autopilot family is on the other end; decides GPS_INPUT vs GLOBAL_POSITION_SENSOR."""
+
+    ARDUPILOT = "ardupilot"
+    PX4 = "px4"
+    UNKNOWN = "unknown"
+
+
+class NavMode(enum.Enum):
+    """Mode of the navigator (outage management, S1)."""
+
+    INIT = "init"  # no trusted fix yet
+    NORMAL = "normal"  # fusing good GNSS
+    DEGRADED = "degraded"  # GNSS present but downgraded (RTK lost, accuracy jump)
+    BRIDGING = "bridging"  # no usable GNSS: carried by the motion model
+    REACQUIRING = "reacquiring"  # GNSS back, not yet trusted (gate)
+    LOST = "lost"  # bridging too long: no position worth publishing
+
+
+class Severity(enum.IntEnum):
+    """MAV_SEVERITY."""
+
+    EMERGENCY = 0
+    ALERT = 1
+    CRITICAL = 2
+    ERROR = 3
+    WARNING = 4
+    NOTICE = 5
+    INFO = 6
+    DEBUG = 7
+
+
+class AlertCode(enum.Enum):
+    """First word after ``CMP `` in a STATUSTEXT (DESIGN.md, alert catalogue)."""
+
+    GNSS_LOST = "GNSS_LOST"
+    RTK_LOST = "RTK_LOST"
+    GNSS_STALE = "GNSS_STALE"
+    BRIDGING = "BRIDGING"
+    GNSS_BACK = "GNSS_BACK"
+    FAULT = "FAULT"
+    INTEGRITY = "INTEGRITY"
+    CAT = "CAT"
+    HDG_READY = "HDG_READY"
+    HDG_APPLIED = "HDG_APPLIED"
+    HDG_REJECT = "HDG_REJECT"
+
+
+# --------------------------------------------------------------------------- samples in
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSample:
+    """One IMU reading (RAW_IMU / SCALED_IMU[2,3] / HIGHRES_IMU).
+
+    ``acc_b_mps2`` is specific force (what an accelerometer measures: at rest
+    level it reads about (0, 0, -9.81) in FRD body axes), shape (3,).
+    ``gyro_b_radps`` is angular rate in body axes, shape (3,).
+    """
+
+    t_s: float
+    t_rx_s: float
+    acc_b_mps2: FloatArray
+    gyro_b_radps: FloatArray
+    imu_id: int = 0
+    source: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeSample:
+    """The autopilot's attitude (ATTITUDE or ATTITUDE_QUATERNION), body FRD to NED.
+
+    ``rate_b_radps`` is the body angular rate the autopilot reports, shape (3,).
+    """
+
+    t_s: float
+    t_rx_s: float
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    rate_b_radps: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class GnssFix:
+    """One GNSS fix (GPS_RAW_INT: receiver 0, GPS2_RAW: receiver 1).
+
+    MAVLink's GPS_RAW_INT carries ground speed and course, not a vertical
+    velocity: ``vel_ne_mps`` (shape (2,)) is derived from them and is ``None``
+    when the course is unknown. Accuracies are 1-sigma and ``None`` when the
+    receiver did not report them (MAVLink's 0 / UINT16_MAX "unknown").
+    ``t_s`` is the time of validity of the fix on the autopilot clock.
+    """
+
+    t_s: float
+    t_rx_s: float
+    receiver_id: int
+    fix_type: FixType
+    lat_rad: float
+    lon_rad: float
+    alt_msl_m: float
+    alt_hae_m: float | None
+    vel_ne_mps: FloatArray | None
+    ground_speed_mps: float
+    course_rad: float | None
+    h_acc_m: float | None
+    v_acc_m: float | None
+    vel_acc_mps: float | None
+    hdop: float | None
+    vdop: float | None
+    satellites: int | None
+    dgps_age_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RtkStatus:
+    """GPS_RTK / GPS2_RTK: health and baseline of the RTK solution."""
+
+    t_s: float
+    t_rx_s: float
+    receiver_id: int
+    health: int
+    rate_hz: float
+    satellites: int
+    baseline_m: FloatArray  # shape (3,), in the frame given by baseline_coords_type
+    accuracy: int
+    iar_num_hypotheses: int
+
+
+@dataclass(frozen=True, slots=True)
+class HeartbeatSample:
+    """The autopilot's HEARTBEAT (carries no time of its own: ``t_s`` is the last known)."""
+
+    t_s: float
+    t_rx_s: float
+    system_id: int
+    autopilot: int  # MAV_AUTOPILOT
+    vehicle_type: int  # MAV_TYPE
+    armed: bool
+    system_status: int  # MAV_STATE
+
+
+@dataclass(frozen=True, slots=True)
+class LandedStateSample:
+    """EXTENDED_SYS_STATE (no time of its own: ``t_s`` is the last known)."""
+
+    t_s: float
+    t_rx_s: float
+    landed_state: LandedState
+
+
+@dataclass(frozen=True, slots=True)
+class VfrHudSample:
+    """VFR_HUD (no time of its own: ``t_s`` is the last known)."""
+
+    t_s: float
+    t_rx_s: float
+    airspeed_mps: float
+    ground_speed_mps: float
+    heading_rad: float
+    alt_msl_m: float
+    climb_mps: float
+
+
+@dataclass(frozen=True, slots=True)
+class AutopilotSolution:
+    """The autopilot's own GLOBAL_POSITION_INT: kept for comparison only."""
+
+    t_s: float
+    t_rx_s: float
+    lat_rad: float
+    lon_rad: float
+    alt_msl_m: float
+    vel_ned_mps: FloatArray
+    yaw_rad: float | None
+
+
+@dataclass(frozen=True, slots=True)
+class RebootEvent:
+    """The autopilot rebooted (its boot clock restarted). ``t_s`` is on the new clock."""
+
+    t_s: float
+    t_rx_s: float
+    previous_t_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class HeadingCommand:
+    """The ground station confirmed (``apply=True``) or refused the heading correction."""
+
+    t_s: float
+    t_rx_s: float
+    apply: bool
+
+
+Sample = (
+    ImuSample
+    | AttitudeSample
+    | GnssFix
+    | RtkStatus
+    | HeartbeatSample
+    | LandedStateSample
+    | VfrHudSample
+    | AutopilotSolution
+    | RebootEvent
+    | HeadingCommand
+)
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+@dataclass(frozen=True, slots=True)
+class NavSolution:
+    """The published navigation solution, valid at autopilot time ``t_s``.
+
+    ``pos_cov_ned_m2`` and ``vel_cov_ned_m2ps2`` are 3x3 covariances in the
+    local NED frame. ``fix_type`` is what the solution honestly is (never RTK
+    while bridging; NO_FIX when integrity is lost). ``yaw_rad`` is the
+    (corrected) heading, ``None`` when unknown.
+    """
+
+    t_s: float
+    lat_rad: float
+    lon_rad: float
+    alt_msl_m: float
+    vel_ned_mps: FloatArray
+    pos_cov_ned_m2: FloatArray
+    vel_cov_ned_m2ps2: FloatArray
+    yaw_rad: float | None
+    mode: NavMode
+    fix_type: FixType
+    satellites: int
+    alt_hae_m: float | None = None
+
+    @property
+    def h_acc_m(self) -> float:
+        """Horizontal 1-sigma accuracy: sqrt of the larger eigenvalue of the N-E covariance."""
+        return float(np.sqrt(max(np.linalg.eigvalsh(self.pos_cov_ned_m2[:2, :2])[-1], 0.0)))
+
+    @property
+    def v_acc_m(self) -> float:
+        """Vertical 1-sigma accuracy."""
+        return float(np.sqrt(max(self.pos_cov_ned_m2[2, 2], 0.0)))
+
+    @property
+    def vel_acc_mps(self) -> float:
+        """Speed 1-sigma accuracy: sqrt of the largest velocity-covariance eigenvalue."""
+        return float(np.sqrt(max(np.linalg.eigvalsh(self.vel_cov_ned_m2ps2)[-1], 0.0)))
+
+
+@dataclass(frozen=True, slots=True)
+class Alert:
+    """An alert for STATUSTEXT: published as ``CMP <code> <text>``."""
+
+    t_s: float
+    code: AlertCode
+    severity: Severity
+    text: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class NamedValue:
+    """A NAMED_VALUE_FLOAT (name at most 10 characters, e.g. ``CMP_HPL``)."""
+
+    t_s: float
+    name: str
+    value: float
+
+
+@dataclass(frozen=True, slots=True)
+class IntegrityReport:
+    """Integrity summary for GNSS_INTEGRITY (where the dialect carries it)."""
+
+    t_s: float
+    hpl_m: float
+    vpl_m: float
+    integrity_ok: bool
+    fault_detected: bool
+
+
+Output = NavSolution | Alert | NamedValue | IntegrityReport
