@@ -1,0 +1,331 @@
+"""The pure core's entry point: typed samples in, outputs out.
+
+``Engine.handle(sample)`` is the only call a driver makes (the live service
+and the tlog replay alike). It never opens a socket, reads a clock or imports
+pymavlink: time is the autopilot's ``t_s`` carried by the samples, so the same
+samples give the same outputs, bit for bit.
+
+What it does with a sample:
+
+* IMU and attitude go to the navigator (and attitude to the heading
+  corrector); every timed sample advances the engine's clock ``now``.
+* A GNSS fix is judged by the outage monitor (usable? stale? downgraded?),
+  converted into the local NED frame and offered to the navigator, which gates
+  it against its prediction; the verdict goes back to the monitor.
+* Whenever ``now`` crosses a publication tick (``publish_rate_hz`` on the
+  autopilot clock) the navigator's state is carried to ``now`` and published
+  as a :class:`NavSolution` — also while GNSS is silent, then clocked by the
+  IMU/attitude stream. Status values (``CMP_HACC`` ...) follow at
+  ``status_rate_hz``.
+
+The local NED frame is anchored at the first usable fix and re-anchored when
+the solution is ``reanchor_distance_m`` from it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from companion.nav.frames import LocalFrame, wrap_2pi
+from companion.nav.navigator import GnssMeasurement, Navigator, NavState
+from companion.nav.outage import OutageConfig, OutageMonitor
+from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
+from companion.types import (
+    Alert,
+    AttitudeSample,
+    FixType,
+    GnssFix,
+    HeadingCommand,
+    ImuSample,
+    LandedStateSample,
+    NamedValue,
+    NavMode,
+    NavSolution,
+    Output,
+    RebootEvent,
+    Sample,
+)
+
+log = logging.getLogger(__name__)
+
+# 1-sigma position error by fix type when the receiver reports no accuracy (m, horizontal):
+# RTK fixed ~2 cm, float ~0.3 m, DGPS ~1 m, 3-D ~2.5 m (S1 table and typical receivers).
+FALLBACK_H_SIGMA_M = {
+    FixType.RTK_FIXED: 0.02,
+    FixType.RTK_FLOAT: 0.3,
+    FixType.DGPS: 1.0,
+    FixType.FIX_3D: 2.5,
+    FixType.FIX_2D: 5.0,
+}
+"""S1 reports RTK fixed 1.6-2.2 cm 2-D, float 26-32 cm, no corrections > 3.5-4 m (95 %)."""
+VERTICAL_OVER_HORIZONTAL = 1.5
+"""Vertical 1-sigma as a multiple of horizontal when v_acc is not reported (S1's ratios)."""
+UERE_M = 2.5
+"""User-equivalent range error turning HDOP/VDOP into a 1-sigma position error."""
+DEFAULT_VEL_SIGMA_MPS = 0.3
+"""Velocity 1-sigma when vel_acc is not reported."""
+
+
+@dataclass(frozen=True, slots=True)
+class EngineConfig:
+    """Publication and frame handling of the engine."""
+
+    publish_rate_hz: float = 10.0
+    """GLOBAL_POSITION_INT / GPS_INPUT rate on the autopilot clock (5-10 Hz for GPS_INPUT)."""
+    status_rate_hz: float = 1.0
+    """Rate of the CMP_* NAMED_VALUE_FLOAT status values."""
+    reanchor_distance_m: float = 20_000.0
+    """Re-anchor the local NED frame when the solution is this far from its anchor."""
+    navigator: str = "passthrough"
+    """Which navigator carries the position: 'passthrough' (GNSS + constant velocity)."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.publish_rate_hz <= 50.0:
+            raise ValueError("publish_rate_hz must be in (0, 50]")
+        if not 0.0 < self.status_rate_hz <= self.publish_rate_hz:
+            raise ValueError("status_rate_hz must be in (0, publish_rate_hz]")
+        if self.reanchor_distance_m < 1000.0:
+            raise ValueError("reanchor_distance_m must be >= 1000")
+        if self.navigator not in NAVIGATORS:
+            raise ValueError(f"navigator must be one of {sorted(NAVIGATORS)}")
+
+
+NAVIGATORS: dict[str, Callable[[], Navigator]] = {
+    "passthrough": lambda: PassthroughNavigator(PassthroughConfig()),
+}
+
+
+def gnss_measurement(fix: GnssFix, frame: LocalFrame) -> GnssMeasurement:
+    """A fix as a measurement in ``frame``, with per-axis variances from its accuracies.
+
+    Falls back to DOP x UERE, then to a per-fix-type table, when the receiver
+    does not report h_acc / v_acc / vel_acc.
+    """
+    pos_ned_m = frame.lla_to_ned(fix.lat_rad, fix.lon_rad, fix.alt_msl_m)
+    h_sigma = fix.h_acc_m
+    if h_sigma is None:
+        h_sigma = (
+            fix.hdop * UERE_M
+            if fix.hdop is not None
+            else FALLBACK_H_SIGMA_M.get(fix.fix_type, 10.0)
+        )
+    v_sigma = fix.v_acc_m
+    if v_sigma is None:
+        v_sigma = fix.vdop * UERE_M if fix.vdop is not None else VERTICAL_OVER_HORIZONTAL * h_sigma
+    vel_sigma = fix.vel_acc_mps if fix.vel_acc_mps is not None else DEFAULT_VEL_SIGMA_MPS
+    if fix.vel_ne_mps is not None:
+        vel = np.array([fix.vel_ne_mps[0], fix.vel_ne_mps[1], np.nan])
+        vel_var = np.array([vel_sigma**2, vel_sigma**2, np.nan])
+    else:
+        vel = np.full(3, np.nan)
+        vel_var = np.full(3, np.nan)
+    return GnssMeasurement(
+        t_s=fix.t_s,
+        pos_ned_m=pos_ned_m,
+        pos_var_ned_m2=np.array([h_sigma**2, h_sigma**2, v_sigma**2]),
+        vel_ned_mps=vel,
+        vel_var_ned_m2ps2=vel_var,
+        fix_type=fix.fix_type,
+        receiver_id=fix.receiver_id,
+    )
+
+
+@dataclass(slots=True)
+class EngineStats:
+    """Counters a driver prints in its summary."""
+
+    samples: Counter[str] = field(default_factory=Counter)
+    gnss: Counter[str] = field(default_factory=Counter)
+    alerts: Counter[str] = field(default_factory=Counter)
+    solutions: int = 0
+    reboots: int = 0
+    reanchors: int = 0
+
+
+class Engine:
+    """Samples in, outputs out. See the module docstring."""
+
+    def __init__(
+        self,
+        config: EngineConfig | None = None,
+        outage: OutageConfig | None = None,
+    ) -> None:
+        self.config = config or EngineConfig()
+        self._outage_config = outage or OutageConfig()
+        self.stats = EngineStats()
+        self._handlers: dict[type, Callable[[object], list[Output]]] = {
+            ImuSample: self._on_imu,  # type: ignore[dict-item]
+            AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
+            GnssFix: self._on_gnss,  # type: ignore[dict-item]
+            LandedStateSample: self._on_landed,  # type: ignore[dict-item]
+            HeadingCommand: self._on_heading_command,  # type: ignore[dict-item]
+            RebootEvent: self._on_reboot,  # type: ignore[dict-item]
+        }
+        self._reset()
+
+    def _reset(self) -> None:
+        self.navigator: Navigator = NAVIGATORS[self.config.navigator]()
+        self.monitor = OutageMonitor(self._outage_config)
+        self.frame: LocalFrame | None = None
+        self.now_s: float | None = None
+        self._publish_tick = -1
+        self._status_tick = -1
+        self._last_fused_fix: GnssFix | None = None
+        self._yaw_rad: float | None = None
+        self._yaw_correction_rad = 0.0
+        self._satellites = 0
+
+    # ------------------------------------------------------------------ entry point
+
+    def handle(self, sample: Sample) -> list[Output]:
+        """Take one sample; return what to publish (possibly nothing)."""
+        kind = type(sample)
+        self.stats.samples[kind.__name__] += 1
+        handler = self._handlers.get(kind)
+        outputs = handler(sample) if handler is not None else []
+        t_s = sample.t_s
+        if self.now_s is None or t_s > self.now_s:
+            self.now_s = t_s
+        if self.now_s is not None and self.monitor.last_fused_t_s is not None:
+            outputs += self.monitor.tick(self.now_s)
+            tick = _tick(self.now_s, self.config.publish_rate_hz)
+            if tick > self._publish_tick:
+                self._publish_tick = tick
+                outputs += self._publish(self.now_s)
+        for out in outputs:
+            if isinstance(out, Alert):
+                self.stats.alerts[out.code.value] += 1
+        return outputs
+
+    # ------------------------------------------------------------------ handlers
+
+    def _on_imu(self, sample: ImuSample) -> list[Output]:
+        self.navigator.on_imu(sample)
+        return []
+
+    def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
+        self._yaw_rad = sample.yaw_rad
+        self.navigator.on_attitude(sample, self._yaw_correction_rad)
+        return []
+
+    def _on_landed(self, sample: LandedStateSample) -> list[Output]:
+        return []
+
+    def _on_heading_command(self, sample: HeadingCommand) -> list[Output]:
+        return []
+
+    def _on_reboot(self, sample: RebootEvent) -> list[Output]:
+        log.warning(
+            "autopilot reboot (clock %.1f s -> %.1f s): navigation restarts",
+            sample.previous_t_s,
+            sample.t_s,
+        )
+        self.stats.reboots += 1
+        self._reset()
+        return []
+
+    def _on_gnss(self, fix: GnssFix) -> list[Output]:
+        outputs: list[Output] = []
+        pred = self._state_now(fix.t_s)
+        nav_speed = float(np.hypot(*pred.vel_ned_mps[:2])) if pred is not None else None
+        verdict = self.monitor.assess(fix, nav_speed)
+        outputs += verdict.alerts
+        if not verdict.usable:
+            self.stats.gnss[verdict.reason] += 1
+            return outputs
+        if self.frame is None:
+            self.frame = LocalFrame(fix.lat_rad, fix.lon_rad, fix.alt_msl_m)
+        meas = gnss_measurement(fix, self.frame)
+        if verdict.reinitialise:
+            self.navigator.reset()
+            self.navigator.on_gnss(meas, gate=False)
+            self.monitor.reinitialised(fix.t_s)
+            self.stats.gnss["reinitialised"] += 1
+            self._last_fused_fix = fix
+            return outputs
+        update = self.navigator.on_gnss(meas, gate=verdict.gate)
+        self.stats.gnss["fused" if update.fused else "gate_rejected"] += 1
+        if update.fused:
+            self._last_fused_fix = fix
+            self._satellites = fix.satellites or 0
+        outputs += self.monitor.gate_result(fix.t_s, update.fused)
+        self._maybe_reanchor(fix.t_s)
+        return outputs
+
+    # ------------------------------------------------------------------ publication
+
+    def _state_now(self, t_s: float) -> NavState | None:
+        if not self.navigator.initialised:
+            return None
+        return self.navigator.predict(max(t_s, self.now_s or t_s))
+
+    def _publish(self, t_s: float) -> list[Output]:
+        state = self._state_now(t_s)
+        if state is None or self.frame is None:
+            return []
+        lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
+        solution = NavSolution(
+            t_s=t_s,
+            lat_rad=lat,
+            lon_rad=lon,
+            alt_msl_m=alt,
+            vel_ned_mps=state.vel_ned_mps,
+            pos_cov_ned_m2=state.pos_cov_ned_m2,
+            vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
+            yaw_rad=self._published_yaw(state),
+            mode=self.monitor.mode,
+            fix_type=self._honest_fix_type(),
+            satellites=self._satellites,
+        )
+        self.stats.solutions += 1
+        outputs: list[Output] = [solution]
+        status_tick = _tick(t_s, self.config.status_rate_hz)
+        if status_tick > self._status_tick:
+            self._status_tick = status_tick
+            outputs += [
+                NamedValue(t_s, "CMP_HACC", solution.h_acc_m),
+                NamedValue(t_s, "CMP_VACC", solution.v_acc_m),
+                NamedValue(t_s, "CMP_OUTG", self.monitor.outage_s(t_s)),
+            ]
+        return outputs
+
+    def _published_yaw(self, state: NavState) -> float | None:
+        if state.yaw_rad is not None:
+            return wrap_2pi(state.yaw_rad)
+        if self._yaw_rad is not None:
+            return wrap_2pi(self._yaw_rad - self._yaw_correction_rad)
+        return None
+
+    def _honest_fix_type(self) -> FixType:
+        mode = self.monitor.mode
+        if mode in (NavMode.LOST, NavMode.INIT) or self._last_fused_fix is None:
+            return FixType.NO_FIX
+        if mode in (NavMode.BRIDGING, NavMode.REACQUIRING):
+            return FixType.FIX_3D
+        return FixType(min(int(self._last_fused_fix.fix_type), int(FixType.RTK_FIXED)))
+
+    def _maybe_reanchor(self, t_s: float) -> None:
+        if self.frame is None:
+            return
+        state = self._state_now(t_s)
+        if state is None or self.frame.distance_from_anchor_m(state.pos_ned_m) < (
+            self.config.reanchor_distance_m
+        ):
+            return
+        lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
+        new = LocalFrame(lat, lon, alt)
+        self.navigator.shift_frame(self.frame, new)
+        self.frame = new
+        self.stats.reanchors += 1
+        log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
+
+
+def _tick(t_s: float, rate_hz: float) -> int:
+    """Index of the publication period containing ``t_s`` (robust to 0.1 not being binary)."""
+    return math.floor(t_s * rate_hz + 1e-6)

@@ -1,0 +1,146 @@
+"""Outage monitor: loss, downgrade, stale/frozen fixes, reacquisition."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from companion.nav.outage import OutageConfig, OutageMonitor
+from companion.types import AlertCode, FixType, NavMode
+from tests.helpers import Line, fix_at
+
+LINE = Line((30.0, 0.0, 0.0))
+
+
+def fix(t, **kw):
+    return fix_at(t, LINE.pos_ned_m(t, 0.0), np.array(LINE.vel_ned_mps), **kw)
+
+
+def codes(alerts):
+    return [a.code for a in alerts]
+
+
+def start(mon, t_end=2.0):
+    for k in range(int(t_end * 10)):
+        t = k / 10
+        v = mon.assess(fix(t), 30.0)
+        assert v.usable
+        mon.gate_result(t, True)
+
+
+def test_first_fix_is_not_gated_then_everything_is():
+    mon = OutageMonitor()
+    first = mon.assess(fix(0.0), None)
+    assert first.usable and not first.gate
+    mon.gate_result(0.0, True)
+    assert mon.mode is NavMode.NORMAL
+    assert mon.assess(fix(0.1), 30.0).gate
+
+
+def test_timeout_reacquire_and_back_after_n_gated_fixes():
+    mon = OutageMonitor()
+    start(mon)
+    assert mon.tick(2.5) == []
+    lost = mon.tick(2.95)
+    assert codes(lost) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    assert mon.outage_s(5.0) == pytest.approx(5.0 - 1.9)
+    for k, t in enumerate((6.0, 6.1, 6.2)):
+        v = mon.assess(fix(t), 30.0)
+        assert v.usable and v.gate
+        out = mon.gate_result(t, True)
+        if k < 2:
+            assert mon.mode is NavMode.REACQUIRING and out == []
+    assert codes(out) == [AlertCode.GNSS_BACK]
+    assert mon.mode is NavMode.NORMAL
+
+
+def test_rejected_fixes_while_reacquiring_lead_to_reinitialisation():
+    cfg = OutageConfig(reacquire_max_rejects=4)
+    mon = OutageMonitor(cfg)
+    start(mon)
+    mon.tick(4.0)
+    mon.gate_result(6.0, True)  # one gated fix: REACQUIRING
+    for k in range(4):
+        mon.gate_result(6.1 + k / 10, False)
+    verdict = mon.assess(fix(6.6), 30.0)
+    assert verdict.reinitialise and not verdict.gate
+    assert AlertCode.FAULT in codes(verdict.alerts)
+
+
+def test_downgrade_rtk_lost_once_and_degraded_mode():
+    mon = OutageMonitor()
+    start(mon)
+    v = mon.assess(fix(2.0, fix_type=FixType.RTK_FLOAT, h_acc_m=0.3), 30.0)
+    assert codes(v.alerts) == []  # float is still RTK
+    v = mon.assess(fix(2.1, fix_type=FixType.FIX_3D, h_acc_m=2.0), 30.0)
+    assert codes(v.alerts) == [AlertCode.RTK_LOST]
+    mon.gate_result(2.1, True)
+    assert mon.mode is NavMode.DEGRADED
+    v = mon.assess(fix(2.2, fix_type=FixType.FIX_3D, h_acc_m=2.0), 30.0)
+    assert codes(v.alerts) == []
+
+
+def test_old_corrections_count_as_rtk_lost():
+    mon = OutageMonitor(OutageConfig(rtk_max_age_s=5.0))
+    start(mon)
+    old = replace(fix(2.0), dgps_age_s=8.0)
+    assert codes(mon.assess(old, 30.0).alerts) == [AlertCode.RTK_LOST]
+
+
+def test_accuracy_jump_is_degraded():
+    mon = OutageMonitor()
+    start(mon)
+    mon.assess(fix(2.0, h_acc_m=0.5), 30.0)
+    mon.gate_result(2.0, True)
+    assert mon.mode is NavMode.DEGRADED
+
+
+def test_no_fix_is_unusable():
+    mon = OutageMonitor()
+    start(mon)
+    v = mon.assess(fix(2.0, fix_type=FixType.NO_FIX), 30.0)
+    assert not v.usable and v.reason == "fix_type_1"
+
+
+def test_repeated_positions_when_parked_are_not_stale():
+    mon = OutageMonitor()
+    parked = fix_at(0.0, np.zeros(3), np.zeros(3))
+    for k in range(50):
+        v = mon.assess(replace(parked, t_s=k / 10), 0.0)
+        assert v.usable
+        mon.gate_result(k / 10, True)
+
+
+def test_frozen_but_jittering_fix_is_stale_within_the_window():
+    mon = OutageMonitor()
+    start(mon)
+    rng = np.random.default_rng(1)
+    frozen_at = LINE.pos_ned_m(2.0, 0.0)
+    flagged_at = None
+    for k in range(30):
+        t = 2.0 + k / 10
+        jitter = np.array([*rng.normal(0.0, 0.05, 2), 0.0])
+        v = mon.assess(fix_at(t, frozen_at + jitter, np.array(LINE.vel_ned_mps)), 30.0)
+        if not v.usable:
+            flagged_at = t
+            assert AlertCode.GNSS_STALE in codes(v.alerts)
+            break
+        mon.gate_result(t, True)
+    assert flagged_at is not None and flagged_at - 2.0 <= 2.0
+
+
+def test_long_bridge_is_lost():
+    mon = OutageMonitor(OutageConfig(max_bridge_s=30.0))
+    start(mon)
+    mon.tick(5.0)
+    alerts = mon.tick(40.0)
+    assert AlertCode.INTEGRITY in codes(alerts)
+    assert mon.mode is NavMode.LOST
+
+
+@pytest.mark.parametrize("bad", [{"gnss_timeout_s": 0.0}, {"stale_motion_ratio": 1.5}])
+def test_config_validation_names_the_field(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        OutageConfig(**bad)

@@ -1,0 +1,144 @@
+"""The engine on synthetic straight flights with known truth."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.engine import Engine, EngineConfig
+from companion.types import (
+    Alert,
+    AlertCode,
+    FixType,
+    NamedValue,
+    NavMode,
+    NavSolution,
+    RebootEvent,
+)
+from tests.helpers import ORIGIN, Line, fix_at, line_stream
+
+
+def run(stream, engine=None):
+    engine = engine or Engine()
+    outs = []
+    for sample in stream:
+        outs += engine.handle(sample)
+    return engine, outs
+
+
+def solutions(outs):
+    return [o for o in outs if isinstance(o, NavSolution)]
+
+
+def alerts(outs, code=None):
+    return [o for o in outs if isinstance(o, Alert) and (code is None or o.code is code)]
+
+
+def test_publishes_at_the_configured_rate_including_through_a_gap():
+    _, outs = run(line_stream(30.0, gaps=((10.0, 20.0),)))
+    sols = solutions(outs)
+    times = np.array([s.t_s for s in sols])
+    gaps = np.diff(times)
+    assert len(sols) == pytest.approx(300, abs=2)
+    # publication is clocked by the IMU stream even with no GNSS
+    assert gaps.max() <= 0.1 + 1e-9
+    in_gap = [s for s in sols if 21.5 < s.t_s < 29.5]
+    assert len(in_gap) >= 75
+    assert all(s.mode is NavMode.BRIDGING for s in in_gap)
+
+
+def test_constant_velocity_carries_a_straight_line_through_a_gap():
+    line = Line()
+    _, outs = run(line_stream(30.0, line=line, gaps=((10.0, 20.0),)))
+    errors = {}
+    for s in solutions(outs):
+        pos = ORIGIN.lla_to_ned(s.lat_rad, s.lon_rad, s.alt_msl_m)
+        errors[s.t_s] = float(np.linalg.norm(pos - line.pos_ned_m(s.t_s)))
+    # constant velocity is the exact model of a straight line; GPS_RAW_INT has no
+    # vertical velocity, so the first 0.1 s after the first fix extrapolate with
+    # vd = 0 (0.2 m at 2 m/s climb) until height differences give it
+    assert max(e for t, e in errors.items() if t < 10.15) == pytest.approx(0.2, abs=0.01)
+    assert max(e for t, e in errors.items() if t >= 12.0) < 0.02
+
+
+def test_gap_raises_lost_bridging_then_back():
+    _, outs = run(line_stream(30.0, gaps=((10.0, 20.0),)))
+    lost = alerts(outs, AlertCode.GNSS_LOST)
+    back = alerts(outs, AlertCode.GNSS_BACK)
+    assert len(lost) == 1 and len(alerts(outs, AlertCode.BRIDGING)) == 1
+    assert 20.9 < lost[0].t_s < 21.2  # 1 s timeout after the last fix at t0 + 9.9 s
+    assert len(back) == 1 and 30.0 <= back[0].t_s < 30.5
+    outg = [o.value for o in outs if isinstance(o, NamedValue) and o.name == "CMP_OUTG"]
+    assert max(outg) == pytest.approx(10.0, abs=1.1)
+
+
+def test_fix_type_published_is_honest():
+    def fix_type_at(rel):
+        return FixType.RTK_FIXED if rel < 5.0 else FixType.FIX_3D
+
+    engine, outs = run(line_stream(20.0, gaps=((10.0, 15.0),), fix_type_at=fix_type_at))
+    sols = solutions(outs)
+    assert {s.fix_type for s in sols if 11 < s.t_s < 14.9} == {FixType.RTK_FIXED}
+    assert {s.fix_type for s in sols if 21.5 < s.t_s < 24.9} == {FixType.FIX_3D}
+    assert len(alerts(outs, AlertCode.RTK_LOST)) == 1
+    # never RTK while bridging
+    assert all(s.fix_type <= FixType.FIX_3D for s in sols if s.mode is NavMode.BRIDGING)
+
+
+def test_stale_repeated_fixes_are_flagged_and_never_fused():
+    engine = Engine()
+    line = Line()
+    stale_from = 20.0
+    frozen = None
+    outs = []
+    for sample in line_stream(20.0, line=line):
+        if hasattr(sample, "fix_type") and sample.t_s >= stale_from:
+            frozen = frozen or sample
+            sample = fix_at(sample.t_s, line.pos_ned_m(frozen.t_s), np.array(line.vel_ned_mps))
+        outs += engine.handle(sample)
+    stale = alerts(outs, AlertCode.GNSS_STALE)
+    assert stale and stale[0].t_s - stale_from < 2.0
+    assert engine.stats.gnss["stale"] >= 90
+    # the solution kept moving: error at the end far below the 400 m the frozen fix would give
+    end = solutions(outs)[-1]
+    pos = ORIGIN.lla_to_ned(end.lat_rad, end.lon_rad, end.alt_msl_m)
+    assert np.linalg.norm(pos - line.pos_ned_m(end.t_s)) < 1.0
+
+
+def test_reboot_restarts_navigation():
+    engine, _ = run(line_stream(5.0))
+    assert engine.navigator.initialised
+    engine.handle(RebootEvent(1.0, 100.0, 15.0))
+    assert not engine.navigator.initialised
+    assert engine.stats.reboots == 1
+    assert engine.monitor.mode is NavMode.INIT
+
+
+def test_same_inputs_same_outputs():
+    samples = list(line_stream(15.0, gaps=((5.0, 8.0),), noise_m=0.02, seed=3))
+    _, a = run(samples)
+    _, b = run(samples)
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        assert type(x) is type(y)
+        if isinstance(x, NavSolution):
+            assert (x.lat_rad, x.lon_rad, x.alt_msl_m) == (y.lat_rad, y.lon_rad, y.alt_msl_m)
+            assert np.array_equal(x.pos_cov_ned_m2, y.pos_cov_ned_m2)
+
+
+def test_reanchors_far_from_origin_without_a_jump():
+    engine = Engine(EngineConfig(reanchor_distance_m=1000.0))
+    line = Line((60.0, 0.0, 0.0))
+    _, outs = run(line_stream(40.0, line=line), engine)
+    assert engine.stats.reanchors >= 2
+    for s in solutions(outs):
+        pos = ORIGIN.lla_to_ned(s.lat_rad, s.lon_rad, s.alt_msl_m)
+        assert np.linalg.norm(pos - line.pos_ned_m(s.t_s)) < 0.05
+
+
+def test_bad_config_is_rejected_with_the_key():
+    with pytest.raises(ValueError, match="publish_rate_hz"):
+        EngineConfig(publish_rate_hz=0.0)
+    assert math.isfinite(EngineConfig().publish_rate_hz)
