@@ -1,0 +1,191 @@
+"""``companion``: run | replay | evaluate | simulate | console | config-template.
+
+The only place that configures logging and prints. Every expected failure
+(bad file, bad configuration, unknown scenario) is one line on stderr and a
+non-zero exit status; a traceback means a bug.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+from companion import __version__
+
+EXIT_USAGE = 2
+EXIT_FAILURE = 1
+
+log = logging.getLogger("companion")
+
+
+def _setup_logging(level: str) -> None:
+    logging.basicConfig(
+        level=getattr(logging, level.upper()),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+
+
+def _progress(line: str) -> None:
+    print(f"\r{line}", end="", file=sys.stderr, flush=True)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from companion.config import load_config
+    from companion.service import run_service
+
+    config = load_config(args.config)
+    link = config.link
+    if args.master:
+        link = replace(link, master=args.master)
+    if args.gcs is not None:
+        link = replace(link, gcs=args.gcs)
+    if args.record_dir is not None:
+        link = replace(link, record_dir=args.record_dir)
+    return run_service(replace(config, link=link))
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from companion.config import load_config
+    from companion.replay import replay
+
+    config = load_config(args.config)
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    summary = replay(args.input, args.output, config, None if args.quiet else _progress)
+    if not args.quiet:
+        print(file=sys.stderr)
+    print(summary.to_text())
+    print(f"output: {args.output}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from companion.evaluate import evaluate
+
+    evaluation = evaluate(args.output_tlog, args.truth, args.events)
+    if args.json:
+        print(json.dumps(evaluation.to_dict(), indent=2, sort_keys=True))
+    else:
+        print(evaluation.to_text())
+    if args.plot is not None:
+        from companion.report import plot_evaluation
+
+        plot_evaluation(evaluation, args.plot)
+        print(f"plot: {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from companion import sim
+
+    if args.list:
+        for name in sim.SCENARIO_NAMES:
+            print(name)
+        return 0
+    if args.scenario is None:
+        raise ValueError("give a scenario name (--list shows them)")
+    if args.duration is not None and args.duration <= 0:
+        raise ValueError(f"duration must be > 0 s, got {args.duration:g}")
+    paths = sim.write_scenario(args.scenario, args.out, seed=args.seed, duration_s=args.duration)
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _cmd_console(args: argparse.Namespace) -> int:
+    from companion.console.app import run_console
+
+    return run_console(args.master, once=args.once, duration_s=args.duration)
+
+
+def _cmd_config_template(args: argparse.Namespace) -> int:
+    from companion.config import template
+
+    print(template())
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (exposed for tests and documentation)."""
+    parser = argparse.ArgumentParser(
+        prog="companion",
+        description="Navigation service beside an ArduPilot/PX4 autopilot.",
+    )
+    parser.add_argument("--version", action="version", version=f"companion {__version__}")
+    parser.add_argument(
+        "--log-level", default="info", choices=["debug", "info", "warning", "error"]
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("run", help="run the service on live links")
+    p.add_argument("--master", help="autopilot link URL (overrides the config)")
+    p.add_argument("--gcs", help="ground-station link URL (overrides the config)")
+    p.add_argument("--config", type=Path, help="TOML configuration file")
+    p.add_argument("--record-dir", help="flight recorder folder ('' disables)")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("replay", help="replay a .tlog through the service")
+    p.add_argument("input", type=Path, help="recorded flight (.tlog)")
+    p.add_argument("--output", "-o", type=Path, required=True, help="what the service sends")
+    p.add_argument("--config", type=Path, help="TOML configuration file")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.set_defaults(func=_cmd_replay)
+
+    p = sub.add_parser("evaluate", help="score a replay output against truth")
+    p.add_argument("output_tlog", type=Path, help="the replay's output .tlog")
+    p.add_argument("--truth", type=Path, required=True, help="truth CSV from the simulator")
+    p.add_argument("--events", type=Path, help="event sidecar JSON (default: beside the truth)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--plot", type=Path, help="draw the track and errors to this PNG")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("simulate", help="simulate a flight: .tlog, truth CSV, JSON sidecar")
+    p.add_argument("scenario", nargs="?", help="scenario name (--list shows them)")
+    p.add_argument("--out", type=Path, default=Path("."), help="output folder")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--duration", type=float, help="override the scenario duration, s")
+    p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("console", help="watch the service from the ground (terminal)")
+    p.add_argument("--master", required=True, help="link URL on which the service is heard")
+    p.add_argument("--once", action="store_true", help="print one status screen and exit")
+    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.set_defaults(func=_cmd_console)
+
+    p = sub.add_parser("config-template", help="print every configuration key with defaults")
+    p.set_defaults(func=_cmd_config_template)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console-script entry point."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _setup_logging(args.log_level)
+    from companion.config import ConfigError
+
+    expected: tuple[type[BaseException], ...] = (ConfigError, ValueError, FileNotFoundError)
+    try:
+        from companion.mavlink.tlog import TlogError
+
+        expected += (TlogError,)
+    except ImportError:  # the package is incomplete only in a broken install
+        pass
+    try:
+        from companion.evaluate import EvaluationError
+
+        expected += (EvaluationError,)
+    except ImportError:
+        pass
+    try:
+        return int(args.func(args))
+    except expected as exc:
+        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        return 130

@@ -1,0 +1,250 @@
+"""Configuration: one frozen dataclass per block, loaded from TOML.
+
+Each block's dataclass lives beside the code it configures (``EngineConfig`` in
+``engine.py``, ``OutageConfig`` in ``nav/outage.py`` ...) with its defaults and
+its validation (``__post_init__`` raising ``ValueError``); this module composes
+them into :class:`Config` and loads TOML. An unknown block or key, a value of
+the wrong type or a value the block rejects is a :class:`ConfigError` whose
+one-line message names ``[block] key``.
+
+``companion config-template`` prints every block with its keys, defaults and
+documentation: the example ``systemd/companion.toml`` is that output.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import inspect
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from companion.engine import EngineConfig
+from companion.mavlink.decode import DecoderConfig
+from companion.mavlink.encode import EncoderConfig
+from companion.nav.outage import OutageConfig
+
+
+class ConfigError(ValueError):
+    """A configuration file or value is wrong; the message names the key."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """Where the autopilot and the ground station are, and how the service behaves on them."""
+
+    master: str = "serial:/dev/ttyAMA0:921600"
+    """Autopilot link: serial:DEVICE:BAUD, a device path, udpin:HOST:PORT, udpout:HOST:PORT,
+    tcp:HOST:PORT (client) or tcpin:HOST:PORT (server)."""
+    gcs: str = ""
+    """Optional ground-station link (same URL forms); empty for none."""
+    baud: int = 921600
+    """Serial baud rate when the URL does not give one."""
+    heartbeat_rate_hz: float = 1.0
+    """Our HEARTBEAT rate."""
+    reconnect_s: float = 1.0
+    """Wait before re-opening a link that dropped."""
+    state_file: str = "/var/lib/companion/state.json"
+    """Where the heading correction of the current flight is kept across a restart."""
+    record_dir: str = "/var/lib/companion/logs"
+    """Flight recorder folder (every message in and out, as .tlog); empty to disable."""
+
+    def __post_init__(self) -> None:
+        if not self.master:
+            raise ValueError("master must name a link")
+        if self.baud <= 0:
+            raise ValueError("baud must be > 0")
+        if not 0.1 <= self.heartbeat_rate_hz <= 10.0:
+            raise ValueError("heartbeat_rate_hz must be in [0.1, 10]")
+        if self.reconnect_s <= 0.0:
+            raise ValueError("reconnect_s must be > 0")
+
+
+@dataclass(frozen=True, slots=True)
+class StreamsConfig:
+    """Message rates the service asks the autopilot for (Hz); 0 leaves a stream alone."""
+
+    gps_raw_int_hz: float = 10.0
+    gps2_raw_hz: float = 10.0
+    gps_rtk_hz: float = 1.0
+    raw_imu_hz: float = 50.0
+    scaled_imu2_hz: float = 50.0
+    highres_imu_hz: float = 50.0
+    attitude_hz: float = 50.0
+    attitude_quaternion_hz: float = 50.0
+    extended_sys_state_hz: float = 2.0
+    vfr_hud_hz: float = 2.0
+    global_position_int_hz: float = 5.0
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not 0.0 <= value <= 1000.0:
+                raise ValueError(f"{f.name} must be in [0, 1000]")
+
+    def rates_hz(self) -> dict[str, float]:
+        """Requested rates keyed by MAVLink message name (only those > 0)."""
+        return {
+            f.name.removesuffix("_hz").upper(): getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if getattr(self, f.name) > 0.0
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Config:
+    """The whole configuration."""
+
+    link: LinkConfig = field(default_factory=LinkConfig)
+    streams: StreamsConfig = field(default_factory=StreamsConfig)
+    engine: EngineConfig = field(default_factory=EngineConfig)
+    outage: OutageConfig = field(default_factory=OutageConfig)
+    decoder: DecoderConfig = field(default_factory=DecoderConfig)
+    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+
+
+def load_config(path: Path | None) -> Config:
+    """Read a TOML file (``None``: all defaults). Raises ConfigError naming the key."""
+    if path is None:
+        return Config()
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    return config_from_dict(data)
+
+
+def config_from_dict(data: dict[str, Any]) -> Config:
+    """Build a Config from parsed TOML. Raises ConfigError naming the key."""
+    blocks: dict[str, Any] = {}
+    block_types = {f.name: f.type for f in dataclasses.fields(Config)}
+    hints = typing.get_type_hints(Config)
+    for block, table in data.items():
+        if block not in block_types:
+            raise ConfigError(f"unknown block [{block}] (known: {', '.join(block_types)})")
+        if not isinstance(table, dict):
+            raise ConfigError(f"[{block}] must be a table")
+        blocks[block] = _build_block(block, hints[block], table)
+    return Config(**blocks)
+
+
+def _build_block(block: str, cls: type, table: dict[str, Any]) -> Any:
+    hints = typing.get_type_hints(cls)
+    known = {f.name for f in dataclasses.fields(cls)}
+    kwargs: dict[str, Any] = {}
+    for key, value in table.items():
+        if key not in known:
+            raise ConfigError(f"[{block}] unknown key '{key}' (known: {', '.join(sorted(known))})")
+        kwargs[key] = _coerce(block, key, hints[key], value)
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"[{block}] {exc}") from None
+
+
+def _coerce(block: str, key: str, hint: Any, value: Any) -> Any:
+    """Check a TOML value against a field's type hint (ints accepted for floats,
+    lists for tuples)."""
+    where = f"[{block}] {key}"
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        errors = []
+        for arm in args:
+            if arm is type(None):
+                continue
+            try:
+                return _coerce(block, key, arm, value)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(errors[0] if errors else f"{where}: bad value {value!r}")
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, not {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where} must be a number, not {value!r}")
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, not {value!r}")
+        return value
+    if hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, not {value!r}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list):
+            raise ConfigError(f"{where} must be a list, not {value!r}")
+        item = args[0] if args else Any
+        return tuple(_coerce(block, key, item, v) for v in value) if item is not Any else tuple(value)
+    if inspect.isclass(hint) and issubclass(hint, str | int) and hasattr(hint, "__members__"):
+        try:
+            return hint(value)
+        except ValueError:
+            raise ConfigError(f"{where}: {value!r} is not one of {list(hint.__members__)}") from None
+    return value
+
+
+def template() -> str:
+    """Every block and key with its default and documentation, as TOML."""
+    lines = ["# companion configuration: every key, with its default.", ""]
+    for block in dataclasses.fields(Config):
+        cls = typing.get_type_hints(Config)[block.name]
+        docs = _attribute_docs(cls)
+        lines.append(f"[{block.name}]")
+        summary = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
+        if summary:
+            lines.insert(len(lines) - 1, f"# {summary}")
+        default = cls()
+        for f in dataclasses.fields(cls):
+            for doc_line in docs.get(f.name, "").splitlines():
+                lines.append(f"# {doc_line.strip()}")
+            lines.append(f"{f.name} = {_toml_value(getattr(default, f.name))}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if hasattr(value, "value") and hasattr(type(value), "__members__"):
+        return _toml_value(value.value)
+    if isinstance(value, tuple | list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, float) and value in (float("inf"), float("-inf")):
+        return "inf" if value > 0 else "-inf"
+    return repr(value)
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Attribute docstrings (the string literal under each field) of a dataclass."""
+    try:
+        source = inspect.getsource(cls)
+    except (OSError, TypeError):
+        return {}
+    tree = ast.parse(inspect.cleandoc("\n" + source) if source.startswith(" ") else source)
+    docs: dict[str, str] = {}
+    body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
+    for prev, node in zip(body, body[1:], strict=False):
+        if (
+            isinstance(prev, ast.AnnAssign)
+            and isinstance(prev.target, ast.Name)
+            and isinstance(node, ast.Expr)
+            and isinstance(node.value, ast.Constant)
+            and isinstance(node.value.value, str)
+        ):
+            docs[prev.target.id] = inspect.cleandoc(node.value.value)
+    return docs

@@ -1,0 +1,153 @@
+"""The service at the MAVLink level, without I/O: messages in, packed frames out.
+
+One :class:`Pipeline` is what both drivers run — the asyncio service (live
+links) and the tlog replay — so there is no replay-only or live-only logic.
+It is fed parsed MAVLink messages with their receive time and asked what to
+send; it never opens a socket or reads a clock (the drivers pass ``t_rx_s``:
+wall time live, log time in a replay).
+
+It owns the decoder (MAVLink -> typed samples), the pure engine, the encoder
+(outputs -> MAVLink), the stream requests made when the autopilot first
+appears and after it reboots, the check of the rates actually received, and
+the heartbeat's content.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from companion.config import Config
+from companion.engine import Engine
+from companion.mavlink.decode import Decoder
+from companion.mavlink.encode import Encoder
+from companion.mavlink.streams import RateMonitor, stream_requests
+from companion.types import (
+    Alert,
+    AutopilotFlavour,
+    HeartbeatSample,
+    NavMode,
+    Output,
+    RebootEvent,
+)
+
+log = logging.getLogger(__name__)
+
+MAV_STATE_STANDBY = 3
+MAV_STATE_ACTIVE = 4
+MAV_STATE_CRITICAL = 5
+RATE_CHECK_PERIOD_S = 10.0
+"""How often the received rates are compared with the requested ones (autopilot time)."""
+
+
+@dataclass(slots=True)
+class PipelineStats:
+    """What a driver prints in its summary."""
+
+    messages_in: int = 0
+    messages_out: int = 0
+    out_by_type: Counter[str] = field(default_factory=Counter)
+    rate_warnings: int = 0
+    stream_requests: int = 0
+
+
+class Pipeline:
+    """Decoder -> engine -> encoder, plus stream requests and heartbeat content."""
+
+    def __init__(self, config: Config | None = None) -> None:
+        self.config = config or Config()
+        self.decoder = Decoder(self.config.decoder)
+        self.engine = Engine(self.config.engine, self.config.outage)
+        self.encoder = Encoder(self.config.encoder)
+        self.stats = PipelineStats()
+        self.rates = RateMonitor(self.config.streams.rates_hz())
+        self._autopilot: tuple[int, int] | None = None
+        self._next_rate_check_s: float | None = None
+        self.alerts: list[Alert] = []
+        """Every alert raised, in order (for the drivers' summaries)."""
+
+    # ------------------------------------------------------------------ in
+
+    def on_message(self, msg: Any, t_rx_s: float) -> list[bytes]:
+        """Take one parsed MAVLink message; return the frames to send."""
+        self.stats.messages_in += 1
+        frames: list[bytes] = []
+        samples = self.decoder.decode(msg, t_rx_s)
+        for sample in samples:
+            if isinstance(sample, HeartbeatSample):
+                frames += self._on_autopilot_heartbeat(sample)
+            elif isinstance(sample, RebootEvent):
+                frames += self._request_streams()
+            else:
+                self.rates.observe(type(msg).__name__, sample.t_s)
+            for out in self.engine.handle(sample):
+                frames += self._encode(out)
+        if samples:
+            frames += self._check_rates(samples[-1].t_s)
+        return frames
+
+    def bad_frames(self, count: int) -> None:
+        """The byte parser dropped ``count`` corrupt frames: count them as rejections."""
+        if count > 0:
+            self.decoder.bad_frame(count)
+
+    # ------------------------------------------------------------------ out
+
+    def heartbeat(self) -> bytes:
+        """Our HEARTBEAT, with system_status from the navigation's health."""
+        mode = self.engine.monitor.mode
+        if mode is NavMode.LOST:
+            status = MAV_STATE_CRITICAL
+        elif mode is NavMode.INIT:
+            status = MAV_STATE_STANDBY
+        else:
+            status = MAV_STATE_ACTIVE
+        return self._pack(self.encoder.heartbeat(status))
+
+    @property
+    def flavour(self) -> AutopilotFlavour:
+        """The autopilot family (decides GPS_INPUT vs GLOBAL_POSITION_SENSOR)."""
+        return self.decoder.flavour
+
+    def _encode(self, out: Output) -> list[bytes]:
+        if isinstance(out, Alert):
+            self.alerts.append(out)
+            log.warning("CMP %s %s", out.code.value, out.text)
+        return [self._pack(m) for m in self.encoder.encode(out, self.decoder.flavour)]
+
+    def _pack(self, msg: Any) -> bytes:
+        self.stats.messages_out += 1
+        self.stats.out_by_type[msg.get_type()] += 1
+        return self.encoder.pack(msg)
+
+    def _on_autopilot_heartbeat(self, hb: HeartbeatSample) -> list[bytes]:
+        if self.decoder.system_id is not None and self.encoder.system_id != self.decoder.system_id:
+            self.encoder.system_id = self.decoder.system_id
+        first = self._autopilot is None
+        self._autopilot = (hb.system_id, 1)
+        return self._request_streams() if first else []
+
+    def _request_streams(self) -> list[bytes]:
+        if self._autopilot is None:
+            return []
+        sysid, compid = self._autopilot
+        msgs = stream_requests(sysid, compid, self.decoder.flavour, self.config.streams.rates_hz())
+        self.stats.stream_requests += 1
+        self.rates.reset()
+        self._next_rate_check_s = None
+        log.info("requested %d streams from autopilot %d", len(msgs), sysid)
+        return [self._pack(m) for m in msgs]
+
+    def _check_rates(self, t_s: float) -> list[bytes]:
+        if self._next_rate_check_s is None:
+            self._next_rate_check_s = t_s + RATE_CHECK_PERIOD_S
+            return []
+        if t_s < self._next_rate_check_s:
+            return []
+        self._next_rate_check_s = t_s + RATE_CHECK_PERIOD_S
+        for warning in self.rates.shortfalls(t_s):
+            self.stats.rate_warnings += 1
+            log.warning("stream rate: %s", warning)
+        return []

@@ -1,0 +1,150 @@
+"""The live service: asyncio tasks around one :class:`~companion.pipeline.Pipeline`.
+
+Tasks:
+
+* one reader per link (the autopilot, and the ground station if configured):
+  bytes -> :class:`~companion.mavlink.frames.FrameParser` -> pipeline -> frames
+  sent to every open link and to the flight recorder. A link that drops is
+  re-opened every ``reconnect_s`` until it comes back (a serial adapter
+  unplugged and plugged in again, a TCP peer restarting).
+* the heartbeat: our HEARTBEAT at ``heartbeat_rate_hz``, and the systemd
+  watchdog fed from the same loop only while every reader task is alive.
+
+SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
+recorder flushed, exit status 0.
+
+Everything goes to every link: the autopilot consumes GPS_INPUT and routes the
+rest to its own ground stations; a direct ground-station link sees all of it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import time
+from pathlib import Path
+
+from companion.config import Config
+from companion.mavlink.frames import FrameParser
+from companion.mavlink.link import Link, LinkError, open_link
+from companion.notify import SystemdNotifier
+from companion.pipeline import Pipeline
+from companion.recorder import Recorder
+
+log = logging.getLogger(__name__)
+
+
+class Service:
+    """Run the pipeline on live links until stopped."""
+
+    def __init__(self, config: Config) -> None:
+        self.config = config
+        self.pipeline = Pipeline(config)
+        self.notifier = SystemdNotifier()
+        self._links: dict[str, Link] = {}
+        self._stop = asyncio.Event()
+        self._readers: list[asyncio.Task[None]] = []
+        self.recorder: Recorder | None = None
+        self.links_opened = 0
+
+    def stop(self) -> None:
+        """Ask the service to stop (signal handlers call this)."""
+        self._stop.set()
+
+    async def run(self) -> int:
+        """Run until stopped; returns the process exit status."""
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.add_signal_handler(sig, self.stop)
+        link_cfg = self.config.link
+        if link_cfg.record_dir:
+            try:
+                self.recorder = Recorder(Path(link_cfg.record_dir), time.time())
+            except OSError as exc:
+                log.error("flight recorder disabled: cannot write %s: %s", link_cfg.record_dir, exc)
+        urls = {"autopilot": link_cfg.master}
+        if link_cfg.gcs:
+            urls["gcs"] = link_cfg.gcs
+        self._readers = [
+            asyncio.create_task(self._reader(name, url), name=f"reader-{name}")
+            for name, url in urls.items()
+        ]
+        heartbeat = asyncio.create_task(self._heartbeat(), name="heartbeat")
+        self.notifier.notify("READY=1")
+        log.info("companion running: autopilot %s%s", link_cfg.master,
+                 f", gcs {link_cfg.gcs}" if link_cfg.gcs else "")
+        await self._stop.wait()
+        self.notifier.notify("STOPPING=1")
+        for task in (*self._readers, heartbeat):
+            task.cancel()
+        for task in (*self._readers, heartbeat):
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        for link in list(self._links.values()):
+            await link.close()
+        self._links.clear()
+        if self.recorder is not None:
+            self.recorder.close()
+        log.info("companion stopped")
+        return 0
+
+    async def _reader(self, name: str, url: str) -> None:
+        parser = FrameParser(self.config.encoder.dialect)
+        while not self._stop.is_set():
+            try:
+                link = await open_link(url, self.config.link.baud)
+            except LinkError as exc:
+                log.warning("%s link %s: %s; retrying in %.1f s", name, url, exc,
+                            self.config.link.reconnect_s)
+                await asyncio.sleep(self.config.link.reconnect_s)
+                continue
+            self._links[name] = link
+            self.links_opened += 1
+            log.info("%s link open: %s", name, url)
+            try:
+                while True:
+                    data = await link.recv()
+                    await self._on_bytes(parser, data)
+            except LinkError as exc:
+                log.warning("%s link %s dropped: %s", name, url, exc)
+            finally:
+                self._links.pop(name, None)
+                await link.close()
+            await asyncio.sleep(self.config.link.reconnect_s)
+
+    async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
+        t_rx_s = time.time()
+        bad_before = parser.bad_frames
+        messages = parser.feed(data)
+        self.pipeline.bad_frames(parser.bad_frames - bad_before)
+        for msg in messages:
+            if self.recorder is not None:
+                self.recorder.record(t_rx_s, bytes(msg.get_msgbuf()))
+            frames = self.pipeline.on_message(msg, t_rx_s)
+            if frames:
+                await self._send(frames, t_rx_s)
+
+    async def _send(self, frames: list[bytes], t_s: float) -> None:
+        for frame in frames:
+            if self.recorder is not None:
+                self.recorder.record(t_s, frame)
+            for link in list(self._links.values()):
+                await link.send(frame)
+
+    async def _heartbeat(self) -> None:
+        period_s = 1.0 / self.config.link.heartbeat_rate_hz
+        while True:
+            await self._send([self.pipeline.heartbeat()], time.time())
+            if all(not task.done() for task in self._readers):
+                self.notifier.notify("WATCHDOG=1")
+            else:
+                log.error("a link reader has died: not feeding the watchdog")
+            await asyncio.sleep(period_s)
+
+
+def run_service(config: Config) -> int:
+    """Entry point of ``companion run``."""
+    return asyncio.run(Service(config).run())
