@@ -1,0 +1,587 @@
+"""Scenarios: what to fly, which sensors, which scheduled events; the named catalogue.
+
+A :class:`Scenario` is a frozen description; :func:`build_script` turns it into
+the phase script (:class:`~companion.sim.trajectory.ScriptBuilder`), whose
+segment times :func:`make_scenario` uses to place each named scenario's events
+(e.g. "an RTK outage 40 s into the glide").
+
+Event kinds (``Event.kind``), all on the autopilot clock ``t_s``:
+
+``outage``       no GNSS messages from the receiver in the window
+``rtk_outage``   corrections lost: RTK fixed held ``extrap_s`` (receiver extrapolates),
+                 then RTK float for ``float_s``, then ``fallback`` ("3d" or "dgps");
+                 after the window RTK float for ``refix_s``, then fixed again
+``downgrade``    the fix is ``mode`` ("rtk_float", "dgps", "3d", "none") in the window
+``stale``        the receiver repeats its last fix (position, velocity, fix type,
+                 accuracies) with a fresh time stamp while the aircraft moves (S0)
+``step``         ``offset_ned_m`` added to the reported position
+``ramp``         ``rate_ned_mps * (t - t_start)`` added (S3: e.g. 4 cm/s)
+``dither``       ``amplitude_m * sin(2 pi (t - t_start) / period_s) * axis_ned``
+                 added (S3: e.g. 1 m)
+
+References
+----------
+SEEDS.md S0 (stale fixes), S1 (RTK outages, accuracies), S3 (ramp and dither
+faults), S4 (taxi with heading error, straight legs, GNSS speed noise).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from companion.nav.frames import LocalFrame
+from companion.sim.trajectory import ScriptBuilder
+from companion.types import AutopilotFlavour
+
+PROFILES = ("fixed_wing", "rotorcraft")
+FLIGHTS = ("full", "taxi", "approach", "cruise")
+IMU_GRADES = ("tactical", "mems", "perfect")
+IMU_MESSAGES = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU2")
+GNSS_MODES = ("rtk_fixed", "rtk_float", "dgps", "3d")
+DOWNGRADE_MODES = ("rtk_fixed", "rtk_float", "dgps", "3d", "none")
+EVENT_KINDS = ("outage", "rtk_outage", "downgrade", "stale", "step", "ramp", "dither")
+
+_G0 = 9.80665
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """A scheduled event on one receiver, active for ``t_start_s <= t < t_end_s``."""
+
+    kind: str
+    t_start_s: float
+    t_end_s: float
+    receiver_id: int = 0
+    params: Mapping[str, Any] = field(default_factory=dict, hash=False)
+
+    def __post_init__(self) -> None:
+        if self.kind not in EVENT_KINDS:
+            raise ValueError(f"unknown event kind {self.kind!r} (known: {', '.join(EVENT_KINDS)})")
+        if not (math.isfinite(self.t_start_s) and math.isfinite(self.t_end_s)):
+            raise ValueError(f"event {self.kind}: non-finite window")
+        if not self.t_end_s > self.t_start_s:
+            raise ValueError(f"event {self.kind}: t_end_s must exceed t_start_s")
+        if self.receiver_id not in (0, 1):
+            raise ValueError(f"event {self.kind}: receiver_id must be 0 or 1")
+        if self.kind == "downgrade" and self.params.get("mode") not in DOWNGRADE_MODES:
+            raise ValueError(f"downgrade event needs params mode in {DOWNGRADE_MODES}")
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+
+    def active(self, t_s: float) -> bool:
+        """True when ``t_s`` is inside the window."""
+        return self.t_start_s <= t_s < self.t_end_s
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "kind": self.kind,
+            "t_start_s": self.t_start_s,
+            "t_end_s": self.t_end_s,
+            "receiver_id": self.receiver_id,
+            "params": {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.params.items()},
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Scenario:
+    """Everything that defines a simulated flight (SI units unless the name says deg)."""
+
+    name: str
+    profile: str = "fixed_wing"
+    flight: str = "full"
+    flavour: AutopilotFlavour = AutopilotFlavour.ARDUPILOT
+    duration_s: float | None = None
+    """None: the script's natural length; shorter truncates, longer holds the last state."""
+    imu_grade: str = "mems"
+    imu_message: str = "RAW_IMU"
+    imu_rate_hz: float = 50.0
+    attitude_rate_hz: float = 25.0
+    gnss_rate_hz: float = 10.0
+    gnss_latency_s: float = 0.08
+    gnss_mode: str = "rtk_fixed"
+    gnss_vel_noise_mps: float = 0.05
+    heading_error_deg: float = 0.0
+    crab_deg: float = 0.0
+    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    second_receiver: bool = False
+    noise: bool = True
+    events: tuple[Event, ...] = ()
+    # geometry
+    lat0_deg: float = 52.1650
+    lon0_deg: float = 20.9670
+    alt0_m: float = 110.0
+    geoid_undulation_m: float = 33.5
+    stand_heading_deg: float = 0.0
+    parked_s: float = 30.0
+    taxi_speed_mps: float = 8.0
+    taxi_legs: tuple[tuple[float, float], ...] = ((300.0, 90.0), (450.0, -90.0), (250.0, 45.0))
+    """(straight length m, turn deg after it) pairs; positive turns to the right."""
+    taxi_turn_rate_dps: float = 8.0
+    lineup_turn_deg: float = 90.0
+    cruise_alt_m: float = 300.0
+    """Height above the airfield, m."""
+    cruise_speed_mps: float = 40.0
+    cruise_s: float = 240.0
+    cruise_turns_deg: tuple[float, ...] = (180.0, -90.0, 180.0)
+    bank_deg: float = 20.0
+    approach_speed_mps: float = 33.0
+    approach_alt_m: float = 250.0
+    glide_deg: float = 3.0
+    # timing of the record
+    t_boot0_s: float = 10.0
+    epoch0_s: float = 1_768_471_200.0
+    """UNIX time of autopilot boot (2026-01-15 10:00 UTC): fixed, no clock is read."""
+    truth_rate_hz: float = 10.0
+
+    def __post_init__(self) -> None:
+        def bad(msg: str) -> ValueError:
+            return ValueError(f"scenario {self.name!r}: {msg}")
+
+        if self.profile not in PROFILES:
+            raise bad(f"profile must be one of {PROFILES}")
+        if self.flight not in FLIGHTS:
+            raise bad(f"flight must be one of {FLIGHTS}")
+        if self.profile == "rotorcraft" and self.flight != "full":
+            raise bad("the rotorcraft profile has only the 'full' flight")
+        if (
+            not isinstance(self.flavour, AutopilotFlavour)
+            or self.flavour is AutopilotFlavour.UNKNOWN
+        ):
+            raise bad("flavour must be AutopilotFlavour.ARDUPILOT or PX4")
+        if self.imu_grade not in IMU_GRADES:
+            raise bad(f"imu_grade must be one of {IMU_GRADES}")
+        if self.imu_message not in IMU_MESSAGES:
+            raise bad(f"imu_message must be one of {IMU_MESSAGES}")
+        if self.gnss_mode not in GNSS_MODES:
+            raise bad(f"gnss_mode must be one of {GNSS_MODES}")
+        positive = {
+            "imu_rate_hz": (self.imu_rate_hz, 1000.0),
+            "attitude_rate_hz": (self.attitude_rate_hz, 400.0),
+            "gnss_rate_hz": (self.gnss_rate_hz, 50.0),
+            "truth_rate_hz": (self.truth_rate_hz, 1000.0),
+            "taxi_speed_mps": (self.taxi_speed_mps, 30.0),
+            "taxi_turn_rate_dps": (self.taxi_turn_rate_dps, 45.0),
+            "cruise_speed_mps": (self.cruise_speed_mps, 300.0),
+            "approach_speed_mps": (self.approach_speed_mps, 300.0),
+            "cruise_alt_m": (self.cruise_alt_m, 15000.0),
+            "approach_alt_m": (self.approach_alt_m, 5000.0),
+            "cruise_s": (self.cruise_s, 36000.0),
+            "parked_s": (self.parked_s, 3600.0),
+            "glide_deg": (self.glide_deg, 10.0),
+            "bank_deg": (self.bank_deg, 45.0),
+            "t_boot0_s": (self.t_boot0_s, 1e6),
+        }
+        for key, (val, hi) in positive.items():
+            if not (math.isfinite(val) and 0.0 < val <= hi):
+                raise bad(f"{key} must be in (0, {hi}], got {val}")
+        if self.duration_s is not None and not (
+            math.isfinite(self.duration_s) and self.duration_s > 0.0
+        ):
+            raise bad(f"duration_s must be positive, got {self.duration_s}")
+        checks = {
+            "gnss_latency_s": 0.0 <= self.gnss_latency_s < 1.0,
+            "gnss_vel_noise_mps": 0.0 <= self.gnss_vel_noise_mps < 10.0,
+            "heading_error_deg": abs(self.heading_error_deg) <= 180.0,
+            "crab_deg": abs(self.crab_deg) < 45.0,
+            "lat0_deg": abs(self.lat0_deg) < 85.0,
+            "wind_ned_mps": len(self.wind_ned_mps) == 3
+            and all(math.isfinite(w) and abs(w) < 60.0 for w in self.wind_ned_mps),
+        }
+        for key, ok in checks.items():
+            if not ok:
+                raise bad(f"{key} out of range: {getattr(self, key)!r}")
+        for length, turn in self.taxi_legs:
+            if not (length > 0.0 and abs(turn) <= 180.0):
+                raise bad(f"taxi leg ({length}, {turn}) needs length > 0 and |turn| <= 180")
+        for ev in self.events:
+            if not isinstance(ev, Event):
+                raise bad("events must be Event instances")
+            if ev.receiver_id == 1 and not self.second_receiver:
+                raise bad(f"event {ev.kind} on receiver 1 needs second_receiver=True")
+
+    @property
+    def frame(self) -> LocalFrame:
+        """The local NED frame anchored at the stand / airfield reference (MSL height)."""
+        return LocalFrame(math.radians(self.lat0_deg), math.radians(self.lon0_deg), self.alt0_m)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (enums by value, events as dicts)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "events":
+                v = [e.as_dict() for e in v]
+            elif isinstance(v, AutopilotFlavour):
+                v = v.value
+            elif isinstance(v, tuple):
+                v = [list(x) if isinstance(x, tuple) else x for x in v]
+            out[f.name] = v
+        return out
+
+
+# --------------------------------------------------------------------------- scripts
+
+
+def _ramp_s(dv: float, a_max: float) -> float:
+    """Duration of a smoothstep speed change of dv with peak acceleration a_max (S' max 2.1875)."""
+    return max(2.0, 2.1875 * abs(dv) / a_max)
+
+
+def _land(b: ScriptBuilder, sc: Scenario, fixed_wing: bool) -> None:
+    """From level flight: glide at the path angle, flare, land, roll out, stop, park."""
+    d2r = math.radians
+    if fixed_wing:
+        v_app = sc.approach_speed_mps
+        vg = v_app * math.tan(d2r(sc.glide_deg))
+        b.seg(_ramp_s(b.value["speed"] - v_app, 1.0), "descent", speed=v_app, pitch=d2r(3.0))
+        entry_s, flare_s, td_s, v_td = 6.0, 6.0, 1.5, 0.3
+        lost = 0.5 * vg * entry_s + 0.5 * (vg + v_td) * flare_s + 0.5 * v_td * td_s
+        hold = (b.height_m - lost) / vg
+        if hold <= 0.0:
+            raise ValueError(f"scenario {sc.name!r}: too low to fly the glide path")
+        b.seg(entry_s, "descent", vd=vg, pitch=d2r(1.0))
+        b.seg(hold, "descent")
+        b.seg(flare_s, "flare", vd=v_td, pitch=d2r(5.0), speed=v_app - 3.0)
+        b.seg(td_s, "landing_roll", vd=0.0, air=0.0, pitch=d2r(3.0))
+        b.seg(3.0, "landing_roll", pitch=0.0)
+        v_now = b.value["speed"]
+        b.seg(_ramp_s(v_now - sc.taxi_speed_mps, 2.0), "landing_roll", speed=sc.taxi_speed_mps)
+        b.seg(_ramp_s(sc.taxi_speed_mps, 1.0), "landing_roll", speed=0.0)
+    else:
+        v_dn = 1.0
+        entry_s, td_s = 3.0, 3.0
+        lost = 0.5 * v_dn * entry_s + 0.5 * v_dn * td_s
+        hold = (b.height_m - lost) / v_dn
+        if hold <= 0.0:
+            raise ValueError(f"scenario {sc.name!r}: too low to descend")
+        b.seg(entry_s, "descent", vd=v_dn)
+        b.seg(hold, "descent")
+        b.seg(td_s, "descent", vd=0.0, air=0.0)
+    b.seg(10.0, "parked")
+
+
+def _cruise(b: ScriptBuilder, sc: Scenario, speed: float) -> None:
+    """Level cruise of ``cruise_s`` with coordinated turns spread between equal straights."""
+    rate = _G0 * math.tan(math.radians(sc.bank_deg)) / speed
+    ramp = 3.0
+    turn_s = sum(max(abs(math.radians(a)) / rate, ramp) + ramp for a in sc.cruise_turns_deg)
+    straight = (sc.cruise_s - turn_s) / (len(sc.cruise_turns_deg) + 1)
+    if straight <= 0.0:
+        raise ValueError(f"scenario {sc.name!r}: cruise_s too short for its turns")
+    for a in sc.cruise_turns_deg:
+        b.seg(straight, "cruise")
+        b.turn(math.radians(a), rate, ramp, "cruise")
+    b.seg(straight, "cruise")
+
+
+def _taxi(b: ScriptBuilder, sc: Scenario) -> None:
+    """Taxi legs (straights and turns at taxi speed), then line up and stop on the runway."""
+    v = sc.taxi_speed_mps
+    ramp = 2.0
+    rate = min(math.radians(sc.taxi_turn_rate_dps), 0.8 / v)
+    b.seg(_ramp_s(v, 0.6), "taxi", speed=v)
+    for length, turn in sc.taxi_legs:
+        b.seg(length / v, "taxi")
+        b.turn(math.radians(turn), rate, ramp, "taxi")
+    v_lu = min(3.0, v)
+    b.seg(_ramp_s(v - v_lu, 0.8), "lineup", speed=v_lu)
+    b.turn(math.radians(sc.lineup_turn_deg), min(0.25, 0.8 / v_lu), ramp, "lineup")
+    b.seg(_ramp_s(v_lu, 0.8), "lineup", speed=0.0)
+    b.seg(10.0, "lineup")
+
+
+def build_script(sc: Scenario) -> ScriptBuilder:
+    """The phase script of a scenario (no duration truncation/extension applied).
+
+    Raises
+    ------
+    ValueError
+        If the scenario's geometry cannot be flown (e.g. too low for the glide).
+    """
+    d2r = math.radians
+    t0 = sc.t_boot0_s
+    psi0 = d2r(sc.stand_heading_deg)
+    crab = d2r(sc.crab_deg)
+    if sc.profile == "rotorcraft":
+        b = ScriptBuilder(t0, (0.0, 0.0, 0.0), psi0, crab=crab)
+        b.seg(sc.parked_s, "parked")
+        b.seg(4.0, "takeoff", air=1.0, vd=-1.5)
+        climb_h = sc.cruise_alt_m - b.height_m - 0.5 * 1.5 * 3.0
+        b.seg(max(climb_h / 1.5, 1.0), "takeoff")
+        b.seg(3.0, "takeoff", vd=0.0)
+        b.seg(10.0, "hover")
+        b.turn(d2r(90.0), d2r(15.0), 2.0, "hover")
+        b.seg(10.0, "transition", speed=sc.cruise_speed_mps, pitch=d2r(-6.0))
+        _cruise(b, sc, sc.cruise_speed_mps)
+        b.seg(10.0, "transition", speed=0.0, pitch=0.0)
+        b.seg(10.0, "hover")
+        _land(b, sc, fixed_wing=False)
+        return b
+    if sc.flight in ("full", "taxi"):
+        b = ScriptBuilder(t0, (0.0, 0.0, 0.0), psi0, crab=crab)
+        b.seg(sc.parked_s, "parked")
+        _taxi(b, sc)
+        if sc.flight == "taxi":
+            return b
+        v_r = 0.75 * sc.cruise_speed_mps
+        b.seg(_ramp_s(v_r, 2.5), "takeoff_roll", speed=v_r)
+        b.seg(3.0, "rotation", pitch=d2r(8.0), crab=0.0, speed=v_r + 1.0)
+        b.seg(4.0, "climb", air=1.0, vd=-3.0, pitch=d2r(10.0), speed=v_r + 3.0)
+        v_c = -4.0
+        b.seg(5.0, "climb", vd=v_c, speed=sc.cruise_speed_mps)
+        level_s = 8.0
+        climb_h = sc.cruise_alt_m - b.height_m - 0.5 * (-v_c) * level_s
+        if climb_h <= 0.0:
+            raise ValueError(f"scenario {sc.name!r}: cruise_alt_m too low")
+        b.seg(climb_h / -v_c, "climb")
+        b.seg(level_s, "climb", vd=0.0, pitch=d2r(2.0))
+        _cruise(b, sc, sc.cruise_speed_mps)
+        _land(b, sc, fixed_wing=True)
+        return b
+    if sc.flight == "approach":
+        b = ScriptBuilder(
+            t0,
+            (0.0, 0.0, -sc.approach_alt_m),
+            psi0,
+            speed=sc.approach_speed_mps,
+            pitch=d2r(3.0),
+            air=1.0,
+        )
+        b.seg(20.0, "cruise")
+        _land(b, sc, fixed_wing=True)
+        return b
+    # cruise only
+    b = ScriptBuilder(
+        t0,
+        (0.0, 0.0, -sc.cruise_alt_m),
+        psi0,
+        speed=sc.cruise_speed_mps,
+        pitch=d2r(2.0),
+        air=1.0,
+    )
+    _cruise(b, sc, sc.cruise_speed_mps)
+    return b
+
+
+def phase_window(b: ScriptBuilder, phase: str) -> tuple[float, float]:
+    """First start and last end time of a phase in a script, s."""
+    segs = [s for s in b.segments if s.phase == phase]
+    if not segs:
+        raise ValueError(f"phase {phase!r} not in the script")
+    return segs[0].t0_s, segs[-1].t1_s
+
+
+def natural_duration_s(sc: Scenario) -> float:
+    """Length of the scenario's script, s."""
+    b = build_script(sc)
+    return b.t_s - sc.t_boot0_s
+
+
+# --------------------------------------------------------------------------- catalogue
+
+EventFactory = Callable[[ScriptBuilder], tuple[Event, ...]]
+
+
+def _no_events(b: ScriptBuilder) -> tuple[Event, ...]:
+    return ()
+
+
+def _rtk_outage(length_s: float) -> EventFactory:
+    def make(b: ScriptBuilder) -> tuple[Event, ...]:
+        t0, _ = phase_window(b, "descent")
+        return (
+            Event(
+                "rtk_outage",
+                t0 + 40.0,
+                t0 + 40.0 + length_s,
+                params={"extrap_s": 3.0, "float_s": 5.0, "fallback": "3d", "refix_s": 8.0},
+            ),
+        )
+
+    return make
+
+
+def _gnss_loss(b: ScriptBuilder) -> tuple[Event, ...]:
+    t0, t1 = phase_window(b, "cruise")
+    mid = 0.5 * (t0 + t1)
+    return (Event("outage", mid - 30.0, mid + 30.0),)
+
+
+def _stale(b: ScriptBuilder) -> tuple[Event, ...]:
+    c0, _ = phase_window(b, "cruise")
+    d0, _ = phase_window(b, "descent")
+    return (Event("stale", c0 + 5.0, c0 + 15.0), Event("stale", d0 + 60.0, d0 + 75.0))
+
+
+def _ramp(b: ScriptBuilder) -> tuple[Event, ...]:
+    d0, _ = phase_window(b, "descent")
+    return (Event("ramp", d0 + 30.0, d0 + 90.0, params={"rate_ned_mps": (0.0, 0.0, 0.04)}),)
+
+
+def _dither(b: ScriptBuilder) -> tuple[Event, ...]:
+    d0, _ = phase_window(b, "descent")
+    return (
+        Event(
+            "dither",
+            d0 + 30.0,
+            d0 + 90.0,
+            params={"amplitude_m": 1.0, "period_s": 20.0, "axis_ned": (0.0, 0.0, 1.0)},
+        ),
+    )
+
+
+def _px4(b: ScriptBuilder) -> tuple[Event, ...]:
+    c0, _ = phase_window(b, "cruise")
+    return (Event("downgrade", c0 + 20.0, c0 + 40.0, params={"mode": "3d"}),)
+
+
+def _downgrade(b: ScriptBuilder) -> tuple[Event, ...]:
+    d0, _ = phase_window(b, "descent")
+    t = d0 + 30.0
+    return (
+        Event("downgrade", t, t + 10.0, params={"mode": "rtk_float"}),
+        Event("downgrade", t + 10.0, t + 20.0, params={"mode": "3d"}),
+        Event("downgrade", t + 20.0, t + 30.0, params={"mode": "none"}),
+    )
+
+
+_TACTICAL = {"imu_grade": "tactical", "imu_message": "HIGHRES_IMU", "imu_rate_hz": 100.0}
+_APPROACH = {"flight": "approach", **_TACTICAL}
+
+_CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
+    "taxi": (
+        {
+            "flight": "taxi",
+            **_TACTICAL,
+            "imu_rate_hz": 50.0,
+            "heading_error_deg": 1.0,
+            "gnss_vel_noise_mps": 0.1,
+        },
+        _no_events,
+        "parked 30 s, taxi legs with turns at 8 m/s, line-up; ATTITUDE yaw off by 1 deg (S4)",
+    ),
+    "approach": (
+        dict(_APPROACH),
+        _no_events,
+        "3 deg approach from 250 m, flare, landing roll; RTK fixed throughout",
+    ),
+    "approach_rtk20": (
+        dict(_APPROACH),
+        _rtk_outage(20.0),
+        "3 deg approach with a 20 s RTK correction outage in the glide (S1)",
+    ),
+    "approach_rtk40": (
+        dict(_APPROACH),
+        _rtk_outage(40.0),
+        "3 deg approach with a 40 s RTK correction outage in the glide (S1)",
+    ),
+    "cruise_gnss_loss": (
+        {"flight": "cruise", "gnss_mode": "dgps", "cruise_s": 300.0},
+        _gnss_loss,
+        "cruise with coordinated turns, 60 s with no GNSS at all, MEMS IMU",
+    ),
+    "stale_fix": (
+        {
+            "flight": "approach",
+            "gnss_mode": "dgps",
+            "imu_message": "SCALED_IMU2",
+            "approach_alt_m": 400.0,
+        },
+        _stale,
+        "DGPS descent from 400 m; the receiver repeats its last fix for 10 s level, "
+        "15 s on the descent (S0)",
+    ),
+    "ramp_fault": (
+        {**_APPROACH, "imu_rate_hz": 50.0, "second_receiver": True},
+        _ramp,
+        "approach, receiver 0 position ramps down 4 cm/s for 60 s; second receiver clean (S3)",
+    ),
+    "dither_fault": (
+        {**_APPROACH, "imu_rate_hz": 50.0, "second_receiver": True},
+        _dither,
+        "approach, receiver 0 height dithers 1 m (20 s period) for 60 s; "
+        "second receiver clean (S3)",
+    ),
+    "px4_rotorcraft": (
+        {
+            "profile": "rotorcraft",
+            "flavour": AutopilotFlavour.PX4,
+            **_TACTICAL,
+            "imu_rate_hz": 50.0,
+            "attitude_rate_hz": 50.0,
+            "gnss_rate_hz": 5.0,
+            "cruise_speed_mps": 12.0,
+            "cruise_alt_m": 40.0,
+            "cruise_s": 150.0,
+            "bank_deg": 15.0,
+            "parked_s": 20.0,
+        },
+        _px4,
+        "PX4 multirotor: take-off, hover turn, forward flight with turns, landing; 20 s of 3D fix",
+    ),
+    "downgrade": (
+        dict(_APPROACH),
+        _downgrade,
+        "approach with the fix stepping RTK fixed -> float -> 3D -> none, 10 s each",
+    ),
+    "nominal": (
+        {"flight": "full", "cruise_s": 300.0},
+        _no_events,
+        "complete flight > 10 min: stand, taxi, take-off, climb, cruise with turns, "
+        "3 deg approach, landing; MEMS IMU, RTK fixed, no events",
+    ),
+}
+
+SCENARIO_NAMES: tuple[str, ...] = tuple(_CATALOGUE)
+"""The named scenarios :func:`make_scenario` knows."""
+
+
+def describe(name: str) -> str:
+    """One-line description of a named scenario."""
+    if name not in _CATALOGUE:
+        raise ValueError(f"unknown scenario {name!r} (known: {', '.join(SCENARIO_NAMES)})")
+    return _CATALOGUE[name][2]
+
+
+def make_scenario(name: str, **overrides: Any) -> Scenario:
+    """A named scenario, with any :class:`Scenario` field overridden.
+
+    Events are placed from the (possibly overridden) script unless ``events`` is
+    given; ``duration_s`` defaults to the script's natural length.
+
+    Raises
+    ------
+    ValueError
+        Unknown name, unknown field, or a value out of range (one-line message).
+    """
+    if name not in _CATALOGUE:
+        raise ValueError(f"unknown scenario {name!r} (known: {', '.join(SCENARIO_NAMES)})")
+    base, factory, _ = _CATALOGUE[name]
+    known = {f.name for f in dataclasses.fields(Scenario)}
+    unknown = set(overrides) - known
+    if unknown:
+        raise ValueError(f"unknown scenario field(s): {', '.join(sorted(unknown))}")
+    kw = {**base, **overrides}
+    kw["name"] = name
+    for key in ("wind_ned_mps", "cruise_turns_deg"):
+        if key in kw:
+            kw[key] = tuple(float(x) for x in kw[key])
+    if "taxi_legs" in kw:
+        kw["taxi_legs"] = tuple((float(a), float(b)) for a, b in kw["taxi_legs"])
+    if "events" in kw:
+        kw["events"] = tuple(kw["events"])
+    try:
+        sc = Scenario(**kw)
+    except TypeError as exc:  # wrong value types reach here
+        raise ValueError(f"scenario {name!r}: {exc}") from exc
+    script = build_script(sc)
+    if "events" not in overrides:
+        sc = dataclasses.replace(sc, events=factory(script))
+    if sc.duration_s is None:
+        sc = dataclasses.replace(sc, duration_s=script.t_s - sc.t_boot0_s)
+    return sc
