@@ -1,0 +1,228 @@
+"""Robust MAVLink framing: bytes in, good messages out, corrupt frames counted.
+
+pymavlink's own ``robust_parsing`` drops a whole frame of the length written in
+a (possibly corrupted) header when its CRC fails, so a flipped length byte can
+swallow the good frames that follow. :class:`FrameParser` does its own
+framing instead and, when a candidate frame fails (bad CRC, bad header,
+message id unknown to the dialect, truncated), it resynchronises one byte
+later. The decoding and CRC check of a candidate are pymavlink's
+(``MAVLink.decode``), so what is accepted is exactly what pymavlink accepts.
+
+Counting convention: ``bad_frames`` counts *bad regions*, a maximal run of
+bytes between two good frames that could not be decoded (one corrupt frame, a
+burst of garbage, a frame cut short followed by a good one). ``bad_bytes``
+counts the bytes in them. A message id that the dialect does not know cannot
+be CRC-checked (its CRC_EXTRA is unknown), so it is treated as bad bytes too.
+
+References
+----------
+MAVLink serialization (v1 0xFE and v2 0xFD frames):
+https://mavlink.io/en/guide/serialization.html
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import re
+from types import ModuleType
+from typing import Any
+
+logger = logging.getLogger(__name__)
+
+STX_V1 = 0xFE
+STX_V2 = 0xFD
+HEADER_LEN_V1 = 6
+HEADER_LEN_V2 = 10
+CRC_LEN = 2
+SIGNATURE_LEN = 13
+IFLAG_SIGNED = 0x01
+MAX_FRAME_LEN = HEADER_LEN_V2 + 255 + CRC_LEN + SIGNATURE_LEN
+"""Longest possible MAVLink frame, bytes."""
+
+_STX_RE = re.compile(b"[\xfd\xfe]")
+
+# Results of :func:`try_frame`.
+FRAME_OK = 0
+FRAME_NEED_MORE = 1
+FRAME_BAD = 2
+
+
+def load_dialect(dialect: str) -> ModuleType:
+    """Import ``pymavlink.dialects.v20.<dialect>``.
+
+    Raises
+    ------
+    ValueError
+        If the dialect is not one pymavlink ships.
+    """
+    if not dialect.isidentifier():
+        raise ValueError(f"invalid MAVLink dialect name {dialect!r}")
+    try:
+        return importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
+    except ImportError as exc:
+        raise ValueError(f"unknown MAVLink dialect {dialect!r}") from exc
+
+
+def frame_length(buf: bytes | bytearray, pos: int) -> int:
+    """Total length in bytes of the frame whose STX is at ``buf[pos]``, or 0 if unknown yet.
+
+    ``buf[pos]`` must be an STX byte. Returns 0 when the header bytes needed to
+    know the length are not in ``buf`` yet.
+    """
+    n = len(buf) - pos
+    if buf[pos] == STX_V2:
+        if n < 3:
+            return 0
+        length = HEADER_LEN_V2 + buf[pos + 1] + CRC_LEN
+        if buf[pos + 2] & IFLAG_SIGNED:
+            length += SIGNATURE_LEN
+        return length
+    if n < 2:
+        return 0
+    return HEADER_LEN_V1 + buf[pos + 1] + CRC_LEN
+
+
+def try_frame(
+    mav: Any, mavlink_map: dict[int, Any], buf: bytearray, pos: int
+) -> tuple[int, Any, int]:
+    """Try to decode one frame whose STX byte is at ``buf[pos]``.
+
+    Parameters
+    ----------
+    mav
+        A pymavlink ``MAVLink`` object (its ``decode`` checks the CRC).
+    mavlink_map
+        The dialect's ``mavlink_map`` (message id -> class).
+    buf
+        The bytes; ``buf[pos]`` is 0xFD or 0xFE.
+    pos
+        Index of the STX byte.
+
+    Returns
+    -------
+    (status, message, length)
+        ``FRAME_OK`` with the message and the frame length; ``FRAME_NEED_MORE``
+        when ``buf`` ends before the frame does; ``FRAME_BAD`` when the bytes are
+        not a frame this dialect can verify.
+    """
+    length = frame_length(buf, pos)
+    if length == 0 or len(buf) - pos < length:
+        return FRAME_NEED_MORE, None, 0
+    if buf[pos] == STX_V2:
+        if buf[pos + 2] & ~IFLAG_SIGNED:
+            return FRAME_BAD, None, length  # unknown incompatibility flag
+        msg_id = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+    else:
+        msg_id = buf[pos + 5]
+    if msg_id not in mavlink_map:
+        return FRAME_BAD, None, length
+    try:
+        msg = mav.decode(buf[pos : pos + length])
+    except Exception:  # noqa: BLE001 - pymavlink raises MAVError and others on corrupt input
+        return FRAME_BAD, None, length
+    return FRAME_OK, msg, length
+
+
+class FrameParser:
+    """Bytes from a link in, good MAVLink messages out; never raises on bad input.
+
+    Parameters
+    ----------
+    dialect
+        pymavlink v2.0 dialect module name (``ardupilotmega`` by default).
+
+    Attributes
+    ----------
+    bad_frames : int
+        Bad regions seen (see the module docstring for the convention).
+    bad_bytes : int
+        Bytes in those regions.
+    good_frames : int
+        Messages returned.
+    """
+
+    __slots__ = ("_buf", "_mav", "_map", "_in_bad", "bad_frames", "bad_bytes", "good_frames")
+
+    def __init__(self, dialect: str = "ardupilotmega") -> None:
+        mod = load_dialect(dialect)
+        self._mav = mod.MAVLink(None)
+        self._map: dict[int, Any] = mod.mavlink_map
+        self._buf = bytearray()
+        self._in_bad = False
+        self.bad_frames = 0
+        self.bad_bytes = 0
+        self.good_frames = 0
+
+    def _mark_bad(self, nbytes: int) -> None:
+        if not self._in_bad:
+            self._in_bad = True
+            self.bad_frames += 1
+        self.bad_bytes += nbytes
+
+    def feed(self, data: bytes | bytearray) -> list[Any]:
+        """Add bytes and return the messages completed by them (possibly none).
+
+        Incomplete trailing bytes are kept for the next call.
+        """
+        buf = self._buf
+        buf.extend(data)
+        out: list[Any] = []
+        pos = 0
+        n = len(buf)
+        while pos < n:
+            if buf[pos] != STX_V2 and buf[pos] != STX_V1:
+                m = _STX_RE.search(buf, pos)
+                nxt = n if m is None else m.start()
+                self._mark_bad(nxt - pos)
+                pos = nxt
+                continue
+            status, msg, length = try_frame(self._mav, self._map, buf, pos)
+            if status == FRAME_OK:
+                out.append(msg)
+                self._in_bad = False
+                pos += length
+            elif status == FRAME_BAD:
+                self._mark_bad(1)
+                pos += 1
+            else:
+                break
+        if pos:
+            del buf[:pos]
+        self.good_frames += len(out)
+        return out
+
+    def flush(self) -> list[Any]:
+        """End of stream: decode what the tail still holds, count the rest as bad.
+
+        A false STX inside a bad region can claim a length that runs past the
+        end of the data; :meth:`feed` waits for more bytes, here there are none,
+        so scanning resumes one byte later and good frames behind it are kept.
+        """
+        buf = self._buf
+        out: list[Any] = []
+        pos = 0
+        n = len(buf)
+        while pos < n:
+            if buf[pos] != STX_V2 and buf[pos] != STX_V1:
+                m = _STX_RE.search(buf, pos)
+                nxt = n if m is None else m.start()
+                self._mark_bad(nxt - pos)
+                pos = nxt
+                continue
+            status, msg, length = try_frame(self._mav, self._map, buf, pos)
+            if status == FRAME_OK:
+                out.append(msg)
+                self._in_bad = False
+                pos += length
+            else:
+                self._mark_bad(1)
+                pos += 1
+        buf.clear()
+        self.good_frames += len(out)
+        return out
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes waiting for the rest of their frame."""
+        return len(self._buf)

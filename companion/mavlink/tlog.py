@@ -1,0 +1,305 @@
+"""Telemetry logs (.tlog): read robustly, write simply.
+
+A .tlog is a sequence of records, each an 8-byte big-endian unsigned
+timestamp (microseconds since the UNIX epoch when the record was received, the
+convention of MAVProxy and Mission Planner) followed by one raw MAVLink frame.
+The frame's CRC does not cover the timestamp.
+
+:class:`TlogReader` never raises on bad content, only on a file it cannot
+open (:class:`TlogError`). What it skips, it counts in :attr:`TlogReader.stats`:
+
+``bad_region``
+    a run of bytes between two good records that is not a record (corrupt
+    frame, garbage, a record cut short). Scanning resumes one byte later, so
+    every good record around a bad one is still read.
+``bad_bytes``
+    the bytes in those runs.
+``truncated_record``
+    an incomplete record at the end of the file.
+``time_backwards``
+    a good frame whose timestamp is earlier than the previous accepted one.
+``time_jump``
+    a good frame whose timestamp is more than ``max_gap_s`` after the previous
+    accepted one (typically a bit flip in the timestamp, which no CRC protects).
+``clock_rebased``
+    ``resync_records`` consecutive skipped records agreed with each other (the
+    recording clock really stepped): the reader accepts the new clock from the
+    last of them on. The earlier ones of the run stay skipped.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+from types import TracebackType
+from typing import Any, BinaryIO
+
+from companion.mavlink.frames import (
+    FRAME_BAD,
+    FRAME_NEED_MORE,
+    STX_V1,
+    STX_V2,
+    load_dialect,
+    try_frame,
+)
+from companion.mavlink.units import US_PER_S
+
+logger = logging.getLogger(__name__)
+
+TIMESTAMP_LEN = 8
+_TS = struct.Struct(">Q")
+_CHUNK_BYTES = 1 << 20
+
+
+class TlogError(Exception):
+    """The log cannot be read at all (missing, unreadable, a directory...)."""
+
+
+class TlogReader:
+    """Iterate ``(t_rx_s, message)`` over a .tlog; robust to corruption.
+
+    Parameters
+    ----------
+    path
+        The file.
+    dialect
+        pymavlink v2.0 dialect module name.
+    max_gap_s
+        Largest forward step between consecutive records accepted as real, s.
+    resync_records
+        Consecutive mutually consistent skipped records after which the reader
+        accepts that the recording clock stepped.
+
+    Raises
+    ------
+    TlogError
+        At construction, if the file cannot be opened.
+    """
+
+    def __init__(
+        self,
+        path: Path | str,
+        dialect: str = "ardupilotmega",
+        max_gap_s: float = 3600.0,
+        resync_records: int = 5,
+    ) -> None:
+        self.path = Path(path)
+        try:
+            mod = load_dialect(dialect)
+        except ValueError as exc:
+            raise TlogError(str(exc)) from exc
+        self._mod = mod
+        self._max_gap_us = int(max_gap_s * US_PER_S)
+        self._resync = max(1, int(resync_records))
+        try:
+            fh = open(self.path, "rb")  # noqa: SIM115 - closed in __iter__
+        except OSError as exc:
+            raise TlogError(f"cannot open tlog {self.path}: {exc.strerror or exc}") from exc
+        self._fh: BinaryIO | None = fh
+        self.stats: collections.Counter[str] = collections.Counter()
+        self.messages = 0
+
+    def close(self) -> None:
+        """Close the file (iteration also closes it when done)."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> TlogReader:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __iter__(self) -> Iterator[tuple[float, Any]]:
+        fh = self._fh
+        if fh is None:
+            return
+        mav = self._mod.MAVLink(None)
+        mmap_ = self._mod.mavlink_map
+        stats = self.stats
+        buf = bytearray()
+        last_us: int | None = None
+        cand_us: int | None = None
+        cand_run = 0
+        in_bad = False
+        tail_cut = False
+        eof = False
+        max_gap = self._max_gap_us
+        try:
+            while True:
+                if not eof:
+                    try:
+                        chunk = fh.read(_CHUNK_BYTES)
+                    except OSError as exc:
+                        logger.warning("tlog %s: read error %s; stopping", self.path, exc)
+                        chunk = b""
+                    if chunk:
+                        buf.extend(chunk)
+                    else:
+                        eof = True
+                pos = 0
+                n = len(buf)
+                while n - pos > TIMESTAMP_LEN:
+                    p = pos + TIMESTAMP_LEN
+                    c = buf[p]
+                    if c == STX_V2 or c == STX_V1:
+                        status, msg, length = try_frame(mav, mmap_, buf, p)
+                    else:
+                        status, msg, length = FRAME_BAD, None, 0
+                    if status == FRAME_NEED_MORE:
+                        if not eof:
+                            break
+                        # At the end of the file this frame can never complete: either the
+                        # last record is cut short, or a false STX in a bad region.
+                        if not in_bad:
+                            in_bad = True
+                            tail_cut = True
+                        stats["bad_bytes"] += 1
+                        pos += 1
+                        continue
+                    if status == FRAME_BAD:
+                        if not in_bad:
+                            in_bad = True
+                            stats["bad_region"] += 1
+                        stats["bad_bytes"] += 1
+                        pos += 1
+                        continue
+                    # FRAME_OK
+                    if tail_cut:  # the region that began with a cut frame was not the tail
+                        stats["bad_region"] += 1
+                        tail_cut = False
+                    in_bad = False
+                    t_us = _TS.unpack_from(buf, pos)[0]
+                    pos = p + length
+                    if last_us is not None and (t_us < last_us or t_us - last_us > max_gap):
+                        stats["time_backwards" if t_us < last_us else "time_jump"] += 1
+                        if cand_us is not None and 0 <= t_us - cand_us <= max_gap:
+                            cand_run += 1
+                        else:
+                            cand_run = 1
+                        cand_us = t_us
+                        if cand_run < self._resync:
+                            continue
+                        stats["clock_rebased"] += 1
+                        logger.warning(
+                            "tlog %s: recording clock stepped by %.3f s; following it",
+                            self.path,
+                            (t_us - last_us) / US_PER_S,
+                        )
+                    cand_us = None
+                    cand_run = 0
+                    last_us = t_us
+                    self.messages += 1
+                    yield t_us / US_PER_S, msg
+                if pos:
+                    del buf[:pos]
+                if eof:
+                    break
+            if buf:  # fewer than a timestamp and an STX left
+                stats["bad_bytes"] += len(buf)
+                if not in_bad:
+                    tail_cut = True
+            if tail_cut:
+                stats["truncated_record"] += 1
+        finally:
+            self.close()
+        if stats:
+            logger.info("tlog %s: %d messages; skipped %s", self.path, self.messages, dict(stats))
+
+
+def read_tlog(path: Path | str, dialect: str = "ardupilotmega") -> Iterator[tuple[float, Any]]:
+    """Iterate ``(t_rx_s, message)`` over a .tlog (see :class:`TlogReader` for the counts).
+
+    ``t_rx_s`` is the record's UNIX-epoch time in seconds.
+
+    Raises
+    ------
+    TlogError
+        Immediately (not at the first ``next``) if the file cannot be opened.
+    """
+    return iter(TlogReader(path, dialect))
+
+
+class TlogWriter:
+    """Append records to a .tlog; a context manager.
+
+    Parameters
+    ----------
+    path
+        The file, created or truncated.
+    mav
+        Optional pymavlink ``MAVLink`` object used to pack message objects that
+        have never been packed (default: a dialect ``ardupilotmega`` packer with
+        system 0, component 0). Messages that came from a parser or were packed
+        already are written byte for byte as they were.
+
+    Raises
+    ------
+    TlogError
+        If the file cannot be created.
+    """
+
+    def __init__(self, path: Path | str, mav: Any = None) -> None:
+        self.path = Path(path)
+        try:
+            self._fh: BinaryIO | None = open(self.path, "wb")  # noqa: SIM115
+        except OSError as exc:
+            raise TlogError(f"cannot create tlog {self.path}: {exc.strerror or exc}") from exc
+        if mav is None:
+            mav = load_dialect("ardupilotmega").MAVLink(None)
+        self._mav = mav
+        self.records = 0
+
+    def write(self, t_s: float, msg_or_bytes: Any) -> None:
+        """Append one record stamped ``t_s`` (UNIX-epoch seconds, or any clock >= 0).
+
+        Raises
+        ------
+        ValueError
+            If ``t_s`` is negative or not finite, or the writer is closed.
+        """
+        if self._fh is None:
+            raise ValueError("TlogWriter is closed")
+        if not (t_s >= 0.0 and t_s < 1.8e13):
+            raise ValueError(f"tlog timestamp must be finite and >= 0, got {t_s!r}")
+        if isinstance(msg_or_bytes, bytes | bytearray | memoryview):
+            data = bytes(msg_or_bytes)
+        else:
+            data = msg_or_bytes.get_msgbuf()
+            if not data:
+                data = msg_or_bytes.pack(self._mav)
+                self._mav.seq = (self._mav.seq + 1) % 256
+        self._fh.write(_TS.pack(int(round(t_s * US_PER_S))))
+        self._fh.write(data)
+        self.records += 1
+
+    def flush(self) -> None:
+        """Flush to the OS."""
+        if self._fh is not None:
+            self._fh.flush()
+
+    def close(self) -> None:
+        """Close the file."""
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> TlogWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
