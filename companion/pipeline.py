@@ -81,7 +81,7 @@ class Pipeline:
             elif isinstance(sample, RebootEvent):
                 frames += self._request_streams()
             else:
-                self.rates.observe(type(msg).__name__, sample.t_s)
+                self.rates.observe(msg.get_type(), sample.t_s)
             for out in self.engine.handle(sample):
                 frames += self._encode(out)
         if samples:

@@ -46,7 +46,16 @@ Time (one clock: the autopilot's time since boot, seconds)
   latest boot-clock message, so the maximum converges to the true offset minus
   the smallest latency seen: mapped times are late by that smallest latency
   (tens of ms at most with a 50 Hz IMU stream). Before any boot-clock time has
-  been seen, such messages are rejected ``no_time_yet``.
+  been seen, such messages are rejected ``no_time_yet``. Once SYSTEM_TIME
+  (``time_unix_usec`` with its ``time_boot_ms``, sent at 1 Hz by ArduPilot and
+  PX4) has given the offset exactly, that offset is used instead, and GNSS
+  fixes land on their time of validity. Epoch-stamped messages are held back
+  (rejected ``awaiting_system_time``) for up to ``system_time_wait_s`` of boot
+  clock after the first of them, so that the offset does not step by the
+  latency once SYSTEM_TIME arrives; without SYSTEM_TIME the estimate is used.
+* ``DecoderConfig.gnss_delay_s`` is subtracted from every GNSS fix time: set it
+  to the receiver's lag when the autopilot stamps fixes on arrival rather than
+  at validity (ArduPilot's ``GPS_DELAY_MS`` plays the same role).
 * ``time_usec == 0`` (ArduPilot's GPS_RAW_INT before the receiver has time)
   and messages without a time (HEARTBEAT, VFR_HUD, EXTENDED_SYS_STATE, GPS_RTK,
   the heading command) take the latest boot-clock time.
@@ -144,6 +153,7 @@ _FIX_TYPES = {int(f): f for f in FixType}
 
 # Message ids (common.xml); fixed by the protocol.
 ID_HEARTBEAT = 0
+ID_SYSTEM_TIME = 2
 ID_SCALED_IMU = 26
 ID_RAW_IMU = 27
 ID_GPS_RAW_INT = 24
@@ -188,6 +198,10 @@ class DecoderConfig:
         Largest plausible angular-rate magnitude, rad/s.
     reboot_backjump_s
         A boot-clock step backwards larger than this is a reboot, s.
+    gnss_delay_s
+        Subtracted from GNSS fix times (receiver lag not in the stamp), s.
+    system_time_wait_s
+        How long epoch-stamped messages wait for SYSTEM_TIME's exact offset, s.
     """
 
     system_id: int | None = None
@@ -199,8 +213,14 @@ class DecoderConfig:
     max_acc_mps2: float = 50.0 * units.STANDARD_GRAVITY_MPS2
     max_gyro_radps: float = 50.0
     reboot_backjump_s: float = 2.0
+    gnss_delay_s: float = 0.0
+    system_time_wait_s: float = 3.0
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.system_time_wait_s <= 60.0:
+            raise ValueError("system_time_wait_s must be in [0, 60]")
+        if not 0.0 <= self.gnss_delay_s <= 1.0:
+            raise ValueError("gnss_delay_s must be in [0, 1]")
         if self.system_id is not None and not 1 <= self.system_id <= 255:
             raise ValueError(f"system_id must be in 1..255, got {self.system_id}")
         if self.reboot_backjump_s <= 0.0:
@@ -250,6 +270,8 @@ class Decoder:
         self.reboots = 0
         self.last_t_s: float | None = None
         self.epoch_offset_s: float | None = None
+        self._offset_exact = False
+        self._first_epoch_boot_s: float | None = None
         self._wraps = 0
         self._last_ms_raw: int | None = None
         self._stream_t: dict[Any, float] = {}
@@ -261,9 +283,11 @@ class Decoder:
         self._alt_lo_mm = c.alt_min_m * units.MM_PER_M
         self._alt_hi_mm = c.alt_max_m * units.MM_PER_M
         self._own_comp = c.own_component
+        self._gnss_delay_s = c.gnss_delay_s
         self._max_acc2 = c.max_acc_mps2**2
         self._max_gyro2 = c.max_gyro_radps**2
         self._handlers: dict[int, Callable[[Any, float], Sample | None]] = {
+            ID_SYSTEM_TIME: self._system_time,
             ID_GPS_RAW_INT: self._gps_raw,
             ID_GPS2_RAW: self._gps2_raw,
             ID_GPS_RTK: self._gps_rtk,
@@ -375,6 +399,8 @@ class Decoder:
         self._last_ms_raw = None
         self._stream_t.clear()
         self.epoch_offset_s = None
+        self._offset_exact = False
+        self._first_epoch_boot_s = None
         self.last_t_s = None
 
     def _boot_time(
@@ -432,14 +458,19 @@ class Decoder:
         and would otherwise look like the boot clock jumping back.
         """
         if raw_us > units.EPOCH_USEC_THRESHOLD:
-            last = self.last_t_s
-            if last is None:
-                raise _Rejected("no_time_yet")
             epoch_s = raw_us / units.US_PER_S
-            d = epoch_s - last
             off = self.epoch_offset_s
-            if off is None or d > off:
-                self.epoch_offset_s = off = d
+            if not self._offset_exact or off is None:
+                last = self.last_t_s
+                if last is None:
+                    raise _Rejected("no_time_yet")
+                if self._first_epoch_boot_s is None:
+                    self._first_epoch_boot_s = last
+                if last - self._first_epoch_boot_s < self.config.system_time_wait_s:
+                    raise _Rejected("awaiting_system_time")
+                d = epoch_s - last
+                if off is None or d > off:
+                    self.epoch_offset_s = off = d
             t_s = epoch_s - off
             prev = self._stream_t.get(stream)
             if prev is not None and t_s < prev:
@@ -458,6 +489,15 @@ class Decoder:
         if self.last_t_s is None or t_s > self.last_t_s:
             self.last_t_s = t_s
         return t_s
+
+    def _system_time(self, msg: Any, t_rx_s: float) -> None:
+        """SYSTEM_TIME: when the autopilot has UNIX time, the exact epoch-to-boot offset."""
+        if msg.time_unix_usec > units.EPOCH_USEC_THRESHOLD:
+            # the pair gives the offset; the boot clock itself is left to the "now" streams
+            t_boot_s = (msg.time_boot_ms + self._wraps * UINT32_WRAP_MS) / units.MS_PER_S
+            self.epoch_offset_s = msg.time_unix_usec / units.US_PER_S - t_boot_s
+            self._offset_exact = True
+        return None
 
     def _now(self) -> float:
         t = self.last_t_s
@@ -580,7 +620,7 @@ class Decoder:
         eph = msg.eph
         epv = msg.epv
         sats = msg.satellites_visible
-        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False)
+        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - self._gnss_delay_s
         return GnssFix(
             t_s=t_s,
             t_rx_s=t_rx_s,

@@ -20,9 +20,8 @@ from companion.nav.frames import LocalFrame
 from companion.sim import autopilot as ap
 from companion.sim.scenarios import Event, Scenario, build_script
 from companion.sim.sensors import (
+    ATTITUDE_ERROR_BY_GRADE,
     ATTITUDE_RATE_NOISE_RADPS,
-    ATTITUDE_SIGMA_RAD,
-    ATTITUDE_TAU_S,
     AUTOPILOT_POS_SIGMA_M,
     AUTOPILOT_POS_TAU_S,
     GNSS_MODE_SPECS,
@@ -241,10 +240,11 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
     att_err = np.zeros((len(t_att), 3))
     rate_err = np.zeros((len(t_att), 3))
     if noise:
+        att_sigma_rad, att_tau_s = ATTITUDE_ERROR_BY_GRADE[sc.imu_grade]
         for k in range(3):
             att_err[:, k] = gauss_markov_fast(
-                rng_att, len(t_att), 1.0 / sc.attitude_rate_hz, ATTITUDE_SIGMA_RAD[k],
-                ATTITUDE_TAU_S, 1,
+                rng_att, len(t_att), 1.0 / sc.attitude_rate_hz, att_sigma_rad[k],
+                att_tau_s, 1,
             )[:, 0]  # fmt: skip
         rate_err = rng_att.standard_normal((len(t_att), 3)) * ATTITUDE_RATE_NOISE_RADPS
     att_err[:, 2] += math.radians(sc.heading_error_deg)
@@ -264,7 +264,7 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
     t_hb = _grid(t0, t1, 1.0, 1e3)  # the first message of the record
     armed = [p != "parked" for p in path.phase_at(t_hb)] if len(t_hb) else []
     streams.append(ap.heartbeat_stream(t_hb, ardupilot, fixed_wing, armed))
-    streams.append(ap.system_time_stream(_grid(t0, t1, 1.0, 1e3, offset_s=0.6), sc.epoch0_s))
+    streams.append(ap.system_time_stream(_grid(t0, t1, 1.0, 1e3), sc.epoch0_s))
     t_vfr = _grid(t0, t1, 4.0, 1e3, offset_s=0.11)
     sv = path.evaluate(t_vfr)
     _, _, alt_v = _lla(frame, sv.pos_ned_m)

@@ -103,9 +103,16 @@ GNSS_MODE_SPECS: dict[str, GnssModeSpec] = {
 }
 """Per-axis sigmas: RTK fixed 2.1 cm 2-D RMS / 3 cm V, float 0.28 / 0.5 m, 3D 3.5 / 4 m (S1)."""
 
-ATTITUDE_SIGMA_RAD = (0.05 * _DEG, 0.05 * _DEG, 0.2 * _DEG)
-"""The autopilot's own attitude error (roll, pitch, yaw), 1-sigma, rad."""
-ATTITUDE_TAU_S = 60.0
+ATTITUDE_ERROR_BY_GRADE: dict[str, tuple[tuple[float, float, float], float]] = {
+    "tactical": ((0.01 * _DEG, 0.01 * _DEG, 0.02 * _DEG), 300.0),
+    "mems": ((0.05 * _DEG, 0.05 * _DEG, 0.2 * _DEG), 60.0),
+    "perfect": ((0.0, 0.0, 0.0), 60.0),
+}
+"""The autopilot's own attitude error (roll, pitch, yaw) 1-sigma [rad] and correlation
+time [s], by IMU grade: an EKF on a tactical IMU (gyro bias 1-10 deg/h, i.e. at most
+0.003 deg/s of drift between GNSS updates) holds its heading to a few hundredths of a
+degree around its alignment error; a MEMS autopilot's heading wanders by tenths. The
+constant alignment error (S4) is added separately (``heading_error_deg``)."""
 ATTITUDE_RATE_NOISE_RADPS = 0.001
 AUTOPILOT_POS_SIGMA_M = (0.3, 0.3, 0.5)
 AUTOPILOT_POS_TAU_S = 30.0

@@ -270,8 +270,9 @@ def test_sysid_lock_and_filters() -> None:
 
 
 def test_epoch_gps_time_is_mapped_onto_boot_clock() -> None:
-    """Boot clock at 100 Hz; GPS epoch-stamped with true offset E and 120 ms latency."""
-    d = Decoder()
+    """Boot clock at 100 Hz; GPS epoch-stamped with true offset E and 120 ms latency;
+    no SYSTEM_TIME (and no wait for it): the running-maximum estimate."""
+    d = Decoder(DecoderConfig(system_time_wait_s=0.0))
     d.decode(AP.parsed(heartbeat()), 0.0)
     epoch0 = 1_700_000_000.0
     # no boot time yet -> rejected

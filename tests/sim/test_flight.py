@@ -197,10 +197,9 @@ def test_every_named_scenario_builds() -> None:
 def test_samples_match_the_project_decoder(name: str) -> None:
     """companion.mavlink.decode turns the tlog's messages into exactly SimFlight.samples.
 
-    One known difference: ArduPilot stamps GPS_RAW_INT with the UNIX time of the
-    fix and the decoder maps it to the boot clock by the running offset to the
-    newest boot-clock message, i.e. to about the arrival time; SimFlight keeps
-    the true time of validity (earlier by up to the GNSS latency).
+    ArduPilot stamps GPS_RAW_INT with the UNIX time of the fix; the decoder maps it
+    onto the boot clock with SYSTEM_TIME's exact offset, so the fix lands on its
+    time of validity up to the rounding of whole microseconds.
     """
     from pymavlink.dialects.v20 import ardupilotmega as mav
 
@@ -220,7 +219,7 @@ def test_samples_match_the_project_decoder(name: str) -> None:
         for fld in a.__dataclass_fields__:
             x, y = getattr(a, fld), getattr(b, fld)
             if epoch_gnss and isinstance(a, GnssFix) and fld == "t_s":
-                assert 0.0 <= x - y <= sc.gnss_latency_s + 0.011
+                assert abs(x - y) < 1e-6
             elif isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
                 np.testing.assert_array_equal(x, y)
             else:
