@@ -26,6 +26,7 @@ from typing import Any
 from companion.engine import EngineConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
+from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
 
 
@@ -74,8 +75,8 @@ class StreamsConfig:
     raw_imu_hz: float = 50.0
     scaled_imu2_hz: float = 50.0
     highres_imu_hz: float = 50.0
-    attitude_hz: float = 50.0
-    attitude_quaternion_hz: float = 50.0
+    attitude_hz: float = 25.0
+    attitude_quaternion_hz: float = 25.0
     extended_sys_state_hz: float = 2.0
     vfr_hud_hz: float = 2.0
     global_position_int_hz: float = 5.0
@@ -103,6 +104,7 @@ class Config:
     streams: StreamsConfig = field(default_factory=StreamsConfig)
     engine: EngineConfig = field(default_factory=EngineConfig)
     outage: OutageConfig = field(default_factory=OutageConfig)
+    heading: HeadingConfig = field(default_factory=HeadingConfig)
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
 
@@ -187,12 +189,16 @@ def _coerce(block: str, key: str, hint: Any, value: Any) -> Any:
         if not isinstance(value, list):
             raise ConfigError(f"{where} must be a list, not {value!r}")
         item = args[0] if args else Any
-        return tuple(_coerce(block, key, item, v) for v in value) if item is not Any else tuple(value)
+        return (
+            tuple(_coerce(block, key, item, v) for v in value) if item is not Any else tuple(value)
+        )
     if inspect.isclass(hint) and issubclass(hint, str | int) and hasattr(hint, "__members__"):
         try:
             return hint(value)
         except ValueError:
-            raise ConfigError(f"{where}: {value!r} is not one of {list(hint.__members__)}") from None
+            raise ConfigError(
+                f"{where}: {value!r} is not one of {list(hint.__members__)}"
+            ) from None
     return value
 
 
@@ -210,7 +216,11 @@ def template() -> str:
         for f in dataclasses.fields(cls):
             for doc_line in docs.get(f.name, "").splitlines():
                 lines.append(f"# {doc_line.strip()}")
-            lines.append(f"{f.name} = {_toml_value(getattr(default, f.name))}")
+            value = getattr(default, f.name)
+            if value is None:  # TOML has no null: an unset optional key stays commented
+                lines.append(f"# {f.name} = (unset)")
+            else:
+                lines.append(f"{f.name} = {_toml_value(value)}")
         lines.append("")
     return "\n".join(lines)
 

@@ -33,16 +33,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.nav.frames import LocalFrame, wrap_2pi
+from companion.nav.heading import HeadingConfig, HeadingCorrector
 from companion.nav.navigator import GnssMeasurement, Navigator, NavState
 from companion.nav.outage import OutageConfig, OutageMonitor
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.types import (
     Alert,
+    AlertCode,
     AttitudeSample,
     FixType,
     GnssFix,
     HeadingCommand,
     ImuSample,
+    LandedState,
     LandedStateSample,
     NamedValue,
     NavMode,
@@ -50,6 +53,7 @@ from companion.types import (
     Output,
     RebootEvent,
     Sample,
+    VfrHudSample,
 )
 
 log = logging.getLogger(__name__)
@@ -155,15 +159,21 @@ class Engine:
         self,
         config: EngineConfig | None = None,
         outage: OutageConfig | None = None,
+        heading: HeadingConfig | None = None,
     ) -> None:
         self.config = config or EngineConfig()
         self._outage_config = outage or OutageConfig()
+        self._heading_config = heading or HeadingConfig()
+        self.state_changes = 0
+        """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
+        self._pending_state: dict[str, object] | None = None
         self.stats = EngineStats()
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
             ImuSample: self._on_imu,  # type: ignore[dict-item]
             AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
             GnssFix: self._on_gnss,  # type: ignore[dict-item]
             LandedStateSample: self._on_landed,  # type: ignore[dict-item]
+            VfrHudSample: self._on_vfr_hud,  # type: ignore[dict-item]
             HeadingCommand: self._on_heading_command,  # type: ignore[dict-item]
             RebootEvent: self._on_reboot,  # type: ignore[dict-item]
         }
@@ -178,8 +188,8 @@ class Engine:
         self._status_tick = -1
         self._last_fused_fix: GnssFix | None = None
         self._yaw_rad: float | None = None
-        self._yaw_correction_rad = 0.0
         self._satellites = 0
+        self.heading = HeadingCorrector(self._heading_config)
 
     # ------------------------------------------------------------------ entry point
 
@@ -187,6 +197,8 @@ class Engine:
         """Take one sample; return what to publish (possibly nothing)."""
         kind = type(sample)
         self.stats.samples[kind.__name__] += 1
+        if self._pending_state is not None:
+            self._restore_now(sample.t_s)
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []
         t_s = sample.t_s
@@ -201,6 +213,8 @@ class Engine:
         for out in outputs:
             if isinstance(out, Alert):
                 self.stats.alerts[out.code.value] += 1
+                if out.code in _HEADING_CODES:
+                    self.state_changes += 1
         return outputs
 
     # ------------------------------------------------------------------ handlers
@@ -211,14 +225,53 @@ class Engine:
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
-        self.navigator.on_attitude(sample, self._yaw_correction_rad)
+        self.heading.on_attitude(sample)
+        self.navigator.on_attitude(sample, self.heading.correction_rad)
         return []
 
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
+        state = sample.landed_state
+        on_ground = None if state is LandedState.UNDEFINED else state is LandedState.ON_GROUND
+        self.heading.on_landed_state(on_ground)
+        return []
+
+    def _on_vfr_hud(self, sample: VfrHudSample) -> list[Output]:
+        self.heading.on_vfr_hud(sample)
         return []
 
     def _on_heading_command(self, sample: HeadingCommand) -> list[Output]:
-        return []
+        return self.heading.on_command(sample)
+
+    # ------------------------------------------------------------------ persistence
+
+    def persistent_state(self) -> dict[str, object]:
+        """What must survive a restart of the service during a flight (JSON-safe):
+        the heading correction, tied to the autopilot clock it was made on."""
+        return {"t_s": self.now_s, "heading": self.heading.to_state()}
+
+    def restore(self, state: dict[str, object]) -> None:
+        """Restore :meth:`persistent_state` once the first sample shows the same
+        autopilot boot (its clock not behind the saved time); otherwise drop it."""
+        self._pending_state = state
+
+    def _restore_now(self, t_s: float) -> None:
+        state, self._pending_state = self._pending_state, None
+        if state is None:
+            return
+        saved_t = state.get("t_s")
+        if not isinstance(saved_t, int | float) or t_s < saved_t:
+            log.info("saved state is from an earlier autopilot boot: not restored")
+            return
+        heading = state.get("heading")
+        if not isinstance(heading, dict):
+            log.warning("saved state has no heading block: not restored")
+            return
+        try:
+            self.heading = HeadingCorrector.from_state(self._heading_config, heading)
+        except ValueError as exc:
+            log.warning("saved heading state rejected: %s", exc)
+            return
+        log.info("heading correction restored: %.3f deg", math.degrees(self.heading.correction_rad))
 
     def _on_reboot(self, sample: RebootEvent) -> list[Output]:
         log.warning(
@@ -231,7 +284,7 @@ class Engine:
         return []
 
     def _on_gnss(self, fix: GnssFix) -> list[Output]:
-        outputs: list[Output] = []
+        outputs: list[Output] = self.heading.on_gnss(fix)
         pred = self._state_now(fix.t_s)
         nav_speed = float(np.hypot(*pred.vel_ned_mps[:2])) if pred is not None else None
         verdict = self.monitor.assess(fix, nav_speed)
@@ -299,7 +352,7 @@ class Engine:
         if state.yaw_rad is not None:
             return wrap_2pi(state.yaw_rad)
         if self._yaw_rad is not None:
-            return wrap_2pi(self._yaw_rad - self._yaw_correction_rad)
+            return wrap_2pi(self.heading.corrected_yaw_rad(self._yaw_rad))
         return None
 
     def _honest_fix_type(self) -> FixType:
@@ -324,6 +377,9 @@ class Engine:
         self.frame = new
         self.stats.reanchors += 1
         log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
+
+
+_HEADING_CODES = frozenset({AlertCode.HDG_READY, AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT})
 
 
 def _tick(t_s: float, rate_hz: float) -> int:

@@ -26,7 +26,9 @@ from companion.mavlink.encode import Encoder
 from companion.mavlink.streams import RateMonitor, stream_requests
 from companion.types import (
     Alert,
+    AlertCode,
     AutopilotFlavour,
+    HeadingCommand,
     HeartbeatSample,
     NavMode,
     Output,
@@ -35,11 +37,22 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
+MAV_CMD_USER_1 = 31010
+"""The heading-confirmation command (see companion.mavlink.decode)."""
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
 MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
 MAV_STATE_CRITICAL = 5
 RATE_CHECK_PERIOD_S = 10.0
 """How often the received rates are compared with the requested ones (autopilot time)."""
+STREAM_NEEDS: dict[str, tuple[str, ...]] = {
+    "GNSS": ("GPS_RAW_INT",),
+    "IMU": ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU2", "SCALED_IMU", "SCALED_IMU3"),
+    "attitude": ("ATTITUDE", "ATTITUDE_QUATERNION"),
+}
+"""What the estimators need, each met by any one of its messages (ArduPilot sends
+RAW_IMU/SCALED_IMU2 and ATTITUDE, PX4 HIGHRES_IMU and ATTITUDE_QUATERNION)."""
 
 
 @dataclass(slots=True)
@@ -59,12 +72,13 @@ class Pipeline:
     def __init__(self, config: Config | None = None) -> None:
         self.config = config or Config()
         self.decoder = Decoder(self.config.decoder)
-        self.engine = Engine(self.config.engine, self.config.outage)
+        self.engine = Engine(self.config.engine, self.config.outage, self.config.heading)
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()
         self.rates = RateMonitor(self.config.streams.rates_hz())
         self._autopilot: tuple[int, int] | None = None
         self._next_rate_check_s: float | None = None
+        self._short_streams: set[str] = set()
         self.alerts: list[Alert] = []
         """Every alert raised, in order (for the drivers' summaries)."""
 
@@ -82,8 +96,11 @@ class Pipeline:
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg.get_type(), sample.t_s)
-            for out in self.engine.handle(sample):
+            outputs = self.engine.handle(sample)
+            for out in outputs:
                 frames += self._encode(out)
+            if isinstance(sample, HeadingCommand):
+                frames += self._acknowledge(msg, sample, outputs)
         if samples:
             frames += self._check_rates(samples[-1].t_s)
         return frames
@@ -110,6 +127,17 @@ class Pipeline:
     def flavour(self) -> AutopilotFlavour:
         """The autopilot family (decides GPS_INPUT vs GLOBAL_POSITION_SENSOR)."""
         return self.decoder.flavour
+
+    def _acknowledge(self, msg: Any, command: HeadingCommand, outputs: list[Output]) -> list[bytes]:
+        """COMMAND_ACK to the sender: accepted when the correction was applied (or the
+        refusal taken), temporarily rejected when there was nothing ready to apply."""
+        applied = any(isinstance(o, Alert) and o.code is AlertCode.HDG_APPLIED for o in outputs)
+        ok = applied or not command.apply
+        result = MAV_RESULT_ACCEPTED if ok else MAV_RESULT_TEMPORARILY_REJECTED
+        ack = self.encoder.command_ack(
+            MAV_CMD_USER_1, result, msg.get_srcSystem(), msg.get_srcComponent()
+        )
+        return [self._pack(ack)]
 
     def _encode(self, out: Output) -> list[bytes]:
         if isinstance(out, Alert):
@@ -141,13 +169,28 @@ class Pipeline:
         return [self._pack(m) for m in msgs]
 
     def _check_rates(self, t_s: float) -> list[bytes]:
+        """Warn (in the log) when a needed stream arrives below its requested rate;
+        once when it starts falling short and once when it recovers."""
         if self._next_rate_check_s is None:
             self._next_rate_check_s = t_s + RATE_CHECK_PERIOD_S
             return []
         if t_s < self._next_rate_check_s:
             return []
         self._next_rate_check_s = t_s + RATE_CHECK_PERIOD_S
-        for warning in self.rates.shortfalls(t_s):
+        requested = self.rates.rates_hz
+        short: dict[str, str] = {}
+        for need, names in STREAM_NEEDS.items():
+            wanted = [requested[n] for n in names if n in requested]
+            if not wanted:
+                continue
+            got, best = max((self.rates.measured_hz(n, t_s), n) for n in names)
+            want = min(wanted)
+            if got < self.rates.min_fraction * want:
+                short[need] = f"{need} at {got:.1f} Hz (best: {best}), requested {want:g} Hz"
+        for need in sorted(set(short) - self._short_streams):
             self.stats.rate_warnings += 1
-            log.warning("stream rate: %s", warning)
+            log.warning("stream rate: %s", short[need])
+        for need in sorted(self._short_streams - set(short)):
+            log.info("stream rate: %s back to the requested rate", need)
+        self._short_streams = set(short)
         return []

@@ -21,7 +21,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
+import os
 import signal
 import time
 from pathlib import Path
@@ -48,6 +50,8 @@ class Service:
         self._readers: list[asyncio.Task[None]] = []
         self.recorder: Recorder | None = None
         self.links_opened = 0
+        self._saved_changes = 0
+        self._load_state()
 
     def stop(self) -> None:
         """Ask the service to stop (signal handlers call this)."""
@@ -74,8 +78,11 @@ class Service:
         ]
         heartbeat = asyncio.create_task(self._heartbeat(), name="heartbeat")
         self.notifier.notify("READY=1")
-        log.info("companion running: autopilot %s%s", link_cfg.master,
-                 f", gcs {link_cfg.gcs}" if link_cfg.gcs else "")
+        log.info(
+            "companion running: autopilot %s%s",
+            link_cfg.master,
+            f", gcs {link_cfg.gcs}" if link_cfg.gcs else "",
+        )
         await self._stop.wait()
         self.notifier.notify("STOPPING=1")
         for task in (*self._readers, heartbeat):
@@ -88,6 +95,7 @@ class Service:
         self._links.clear()
         if self.recorder is not None:
             self.recorder.close()
+        self._save_state()
         log.info("companion stopped")
         return 0
 
@@ -97,8 +105,13 @@ class Service:
             try:
                 link = await open_link(url, self.config.link.baud)
             except LinkError as exc:
-                log.warning("%s link %s: %s; retrying in %.1f s", name, url, exc,
-                            self.config.link.reconnect_s)
+                log.warning(
+                    "%s link %s: %s; retrying in %.1f s",
+                    name,
+                    url,
+                    exc,
+                    self.config.link.reconnect_s,
+                )
                 await asyncio.sleep(self.config.link.reconnect_s)
                 continue
             self._links[name] = link
@@ -115,6 +128,35 @@ class Service:
                 await link.close()
             await asyncio.sleep(self.config.link.reconnect_s)
 
+    def _load_state(self) -> None:
+        path = Path(self.config.link.state_file) if self.config.link.state_file else None
+        if path is None or not path.exists():
+            return
+        try:
+            state = json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            log.warning("state file %s unreadable (%s): starting afresh", path, exc)
+            return
+        if isinstance(state, dict):
+            self.pipeline.engine.restore(state)
+            log.info("state loaded from %s (applied if the autopilot has not rebooted)", path)
+
+    def _save_state(self) -> None:
+        """Write the engine's persistent state atomically (write, fsync, rename)."""
+        if not self.config.link.state_file:
+            return
+        path = Path(self.config.link.state_file)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(tmp, "w") as fh:
+                json.dump(self.pipeline.engine.persistent_state(), fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except OSError as exc:
+            log.error("cannot save state to %s: %s", path, exc)
+
     async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
@@ -126,6 +168,9 @@ class Service:
             frames = self.pipeline.on_message(msg, t_rx_s)
             if frames:
                 await self._send(frames, t_rx_s)
+            if self.pipeline.engine.state_changes != self._saved_changes:
+                self._saved_changes = self.pipeline.engine.state_changes
+                self._save_state()
 
     async def _send(self, frames: list[bytes], t_s: float) -> None:
         for frame in frames:

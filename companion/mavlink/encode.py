@@ -96,6 +96,9 @@ _CDEG_FULL = 36000
 _OUTPUTS = ("auto", "gps_input", "global_position_sensor")
 
 
+_ASCII_SPELLING = str.maketrans({"±": "+/-", "°": "deg", "σ": "sigma", "—": "-"})
+
+
 @dataclass(frozen=True, slots=True)
 class EncoderConfig:
     """Encoder settings.
@@ -406,7 +409,10 @@ class Encoder:
             self.suppressed[code.value] += 1
             return []
         self._last_alert_t[code] = alert.t_s
-        text = f"CMP {code.value} {alert.text}".rstrip()[:STATUSTEXT_MAX_CHARS]
+        # STATUSTEXT is read as ASCII by most ground stations (pymavlink among them):
+        # spell the few non-ASCII signs the alerts use, drop anything else
+        plain = alert.text.translate(_ASCII_SPELLING)
+        text = f"CMP {code.value} {plain}".rstrip()[:STATUSTEXT_MAX_CHARS]
         return [
             self._mod.MAVLink_statustext_message(
                 int(alert.severity), text.encode("ascii", "replace"), 0, 0

@@ -60,9 +60,7 @@ def gravity_mps2(lat_rad: float, alt_m: float) -> float:
     s2 = math.sin(lat_rad) ** 2
     g0 = GAMMA_E_MPS2 * (1.0 + _K_SOMIGLIANA * s2) / math.sqrt(1.0 - E2 * s2)
     return g0 * (
-        1.0
-        - 2.0 / A_M * (1.0 + F + _M_RATIO - 2.0 * F * s2) * alt_m
-        + 3.0 / A_M**2 * alt_m**2
+        1.0 - 2.0 / A_M * (1.0 + F + _M_RATIO - 2.0 * F * s2) * alt_m + 3.0 / A_M**2 * alt_m**2
     )
 
 

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
 from companion.nav.frames import LocalFrame
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
 _EYE3 = np.eye(3)

@@ -44,8 +44,9 @@ def test_nis_is_chi2_consistent_on_noisy_fixes_and_gate_rate_matches():
     gate rejects about the configured false-alarm fraction of good fixes."""
     rng = np.random.default_rng(42)
     sigma, vel_sigma, q = 0.5, 0.1, 1e-4
-    cfg = PassthroughConfig(accel_psd_m2ps3=q, gate_false_alarm_prob=0.01,
-                            vertical_velocity_gain=0.05)
+    cfg = PassthroughConfig(
+        accel_psd_m2ps3=q, gate_false_alarm_prob=0.01, vertical_velocity_gain=0.05
+    )
     nav = PassthroughNavigator(cfg)
     vel = np.array([20.0, -5.0, 0.0])
     nis, rejected = [], 0

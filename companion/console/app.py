@@ -1,0 +1,164 @@
+"""Ground-station console: a terminal view of what the service publishes.
+
+``companion console --master udpin:0.0.0.0:14551`` listens on a MAVLink link
+(the GCS side of the autopilot, or the service's own ``--gcs`` link), keeps
+only the service's messages (component 191) and redraws a status screen twice
+a second: position and accuracy, the navigation mode and outage time, the
+protection levels against what the service publishes, the heading correction,
+and the latest ``CMP`` alerts with their severity.
+
+``--once`` prints one screen after the first published solution (or after
+``--duration``) and exits: handy in scripts and tests.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from companion.mavlink.frames import FrameParser
+from companion.mavlink.link import LinkError, open_link
+from companion.mavlink.units import (
+    CDEG_PER_RAD,
+    DEGE7_PER_RAD,
+    MAV_COMP_ID_ONBOARD_COMPUTER,
+    MM_PER_M,
+    UINT16_UNKNOWN,
+)
+
+REDRAW_S = 0.5
+SEVERITY_NAMES = ("EMERG", "ALERT", "CRIT", "ERROR", "WARN", "NOTICE", "INFO", "DEBUG")
+FIX_NAMES = ("no GPS", "no fix", "2D", "3D", "DGPS", "RTK float", "RTK fixed", "static", "PPP")
+
+
+@dataclass(slots=True)
+class ConsoleState:
+    """What the console knows of the service, from its messages."""
+
+    lat_deg: float | None = None
+    lon_deg: float | None = None
+    alt_msl_m: float | None = None
+    speed_mps: float | None = None
+    hdg_deg: float | None = None
+    fix_type: int | None = None
+    values: dict[str, float] = field(default_factory=dict)
+    alerts: deque[tuple[float, str, str]] = field(default_factory=lambda: deque(maxlen=8))
+    heartbeats: int = 0
+    messages: int = 0
+    last_rx_s: float | None = None
+
+    def take(self, msg: Any, t_rx_s: float) -> bool:
+        """Update from one message; False if it is not the service's."""
+        if msg.get_srcComponent() != MAV_COMP_ID_ONBOARD_COMPUTER:
+            return False
+        self.messages += 1
+        self.last_rx_s = t_rx_s
+        kind = msg.get_type()
+        if kind == "GLOBAL_POSITION_INT":
+            self.lat_deg = math.degrees(msg.lat / DEGE7_PER_RAD)
+            self.lon_deg = math.degrees(msg.lon / DEGE7_PER_RAD)
+            self.alt_msl_m = msg.alt / MM_PER_M
+            self.speed_mps = math.hypot(msg.vx, msg.vy) / 100.0
+            self.hdg_deg = (
+                None if msg.hdg == UINT16_UNKNOWN else math.degrees(msg.hdg / CDEG_PER_RAD)
+            )
+        elif kind == "GPS_INPUT":
+            self.fix_type = int(msg.fix_type)
+        elif kind == "NAMED_VALUE_FLOAT":
+            name = msg.name if isinstance(msg.name, str) else msg.name.decode(errors="replace")
+            self.values[name.rstrip("\x00")] = float(msg.value)
+        elif kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
+            sev = SEVERITY_NAMES[msg.severity] if msg.severity < len(SEVERITY_NAMES) else "?"
+            self.alerts.append((t_rx_s, sev, text.rstrip("\x00")))
+        elif kind == "HEARTBEAT":
+            self.heartbeats += 1
+        return True
+
+    def render(self, now_s: float) -> str:
+        """The status screen as text."""
+        v = self.values
+        lines = ["companion console" + _age(self.last_rx_s, now_s), ""]
+        if self.lat_deg is None:
+            lines.append("no solution published yet")
+        else:
+            lines.append(
+                f"position  {self.lat_deg:11.7f} {self.lon_deg:12.7f}  "
+                f"alt {self.alt_msl_m:8.1f} m MSL"
+            )
+            hdg = "—" if self.hdg_deg is None else f"{self.hdg_deg:6.1f}°"
+            lines.append(f"speed     {self.speed_mps:6.1f} m/s   heading {hdg}")
+        fix = FIX_NAMES[self.fix_type] if self.fix_type is not None and self.fix_type < 9 else "—"
+        lines.append(
+            f"fix       {fix:<10} accuracy H {_val(v, 'CMP_HACC')} V {_val(v, 'CMP_VACC')} m (1σ)"
+        )
+        lines.append(
+            f"outage    {_val(v, 'CMP_OUTG')} s   protection HPL {_val(v, 'CMP_HPL')} "
+            f"VPL {_val(v, 'CMP_VPL')} m   category {_val(v, 'CMP_CAT', '.0f')}"
+        )
+        lines.append(
+            f"heading   correction {_val(v, 'CMP_HDGC', '.2f')}° ± {_val(v, 'CMP_HDGE', '.2f')}°"
+        )
+        lines += ["", "alerts:"]
+        if not self.alerts:
+            lines.append("  (none)")
+        for t, sev, text in reversed(self.alerts):
+            lines.append(f"  {time.strftime('%H:%M:%S', time.gmtime(t))} {sev:<6} {text}")
+        return "\n".join(lines)
+
+
+def _val(values: dict[str, float], name: str, fmt: str = ".2f") -> str:
+    return format(values[name], fmt) if name in values else "—"
+
+
+def _age(last_rx_s: float | None, now_s: float) -> str:
+    if last_rx_s is None:
+        return "  (waiting for the service)"
+    age = now_s - last_rx_s
+    return "" if age < 3.0 else f"  (silent for {age:.0f} s)"
+
+
+async def watch(url: str, once: bool = False, duration_s: float | None = None) -> ConsoleState:
+    """Listen on ``url`` and redraw the screen until stopped (or once)."""
+    state = ConsoleState()
+    parser = FrameParser()
+    link = await open_link(url)
+    interactive = sys.stdout.isatty() and not once
+    t_end = None if duration_s is None else time.monotonic() + duration_s
+    next_draw = 0.0
+    try:
+        while t_end is None or time.monotonic() < t_end:
+            try:
+                data = await asyncio.wait_for(link.recv(), timeout=REDRAW_S)
+            except TimeoutError:
+                data = b""
+            now = time.time()
+            for msg in parser.feed(data):
+                state.take(msg, now)
+            if once and state.lat_deg is not None:
+                break
+            if interactive and time.monotonic() >= next_draw:
+                next_draw = time.monotonic() + REDRAW_S
+                sys.stdout.write("\x1b[H\x1b[2J" + state.render(now) + "\n")
+                sys.stdout.flush()
+    finally:
+        await link.close()
+    return state
+
+
+def run_console(url: str, once: bool = False, duration_s: float | None = None) -> int:
+    """Entry point of ``companion console``; returns the exit status."""
+    try:
+        state = asyncio.run(watch(url, once, duration_s))
+    except LinkError as exc:
+        print(f"companion console: cannot open {url}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 0
+    print(state.render(time.time()))
+    return 0 if state.messages else 1

@@ -1,0 +1,127 @@
+"""Taxi heading correction end to end: the bundled taxi (1 deg injected error)
+replayed through the pipeline, the confirmation command, and a service restart."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from companion.config import Config
+from companion.mavlink.tlog import TlogReader
+from companion.mavlink.units import CDEG_PER_RAD, MAV_COMP_ID_ONBOARD_COMPUTER
+from companion.pipeline import Pipeline
+from companion.types import AlertCode
+
+ROOT = Path(__file__).resolve().parent.parent
+TAXI = ROOT / "sitl_fixtures" / "taxi.tlog"
+INJECTED_DEG = json.loads((ROOT / "sitl_fixtures" / "taxi.json").read_text())["parameters"][
+    "heading_error_deg"
+]
+
+
+@pytest.fixture(scope="module")
+def taxi_messages():
+    return list(TlogReader(TAXI))
+
+
+def run(pipeline, messages):
+    out = []
+    for t, msg in messages:
+        for frame in pipeline.on_message(msg, t):
+            out.append(frame)
+    return out
+
+
+def parse(frames):
+    mav = apm.MAVLink(None)
+    return [mav.decode(bytearray(f)) for f in frames]
+
+
+def alert_codes(pipeline):
+    return [a.code for a in pipeline.alerts]
+
+
+def test_taxi_replay_reaches_ready_within_a_tenth_of_a_degree(taxi_messages):
+    pipeline = Pipeline()
+    run(pipeline, taxi_messages)
+    ready = [a for a in pipeline.alerts if a.code is AlertCode.HDG_READY]
+    assert len(ready) == 1
+    value_deg = float(ready[0].text.split()[0])
+    assert abs(value_deg - INJECTED_DEG) < 0.1
+    # not applied without confirmation (auto_apply is off by default)
+    assert pipeline.engine.heading.correction_rad == 0.0
+
+
+def test_auto_applied_correction_is_what_global_position_int_carries(taxi_messages):
+    cfg = Config()
+    cfg = replace(cfg, heading=replace(cfg.heading, auto_apply=True))
+    pipeline = Pipeline(cfg)
+    frames = run(pipeline, taxi_messages)
+    assert AlertCode.HDG_APPLIED in alert_codes(pipeline)
+    applied_at = next(a.t_s for a in pipeline.alerts if a.code is AlertCode.HDG_APPLIED)
+    # the autopilot's own ATTITUDE yaw (off by ~1 deg) vs what we publish after applying
+    last_att_yaw = {}
+    published = []
+    for (t, msg) in taxi_messages:
+        if msg.get_type() == "ATTITUDE":
+            last_att_yaw[msg.time_boot_ms] = msg.yaw
+    att_times = np.array(sorted(last_att_yaw))
+    for m in parse(frames):
+        if m.get_type() == "GLOBAL_POSITION_INT" and m.time_boot_ms / 1000 > applied_at + 1:
+            i = np.searchsorted(att_times, m.time_boot_ms, side="right") - 1
+            raw_deg = math.degrees(last_att_yaw[att_times[i]]) % 360
+            published.append(((m.hdg / CDEG_PER_RAD) * 180 / math.pi - raw_deg + 180) % 360 - 180)
+    assert len(published) > 100
+    correction = math.degrees(pipeline.engine.heading.correction_rad)
+    # published heading = autopilot yaw - correction (to the 0.01 deg of hdg's resolution)
+    np.testing.assert_allclose(published, -correction, atol=0.011)
+
+
+def test_confirmation_command_applies_and_is_acknowledged(taxi_messages):
+    pipeline = Pipeline()
+    run(pipeline, taxi_messages)
+    gcs = apm.MAVLink(None, 255, 190)
+    cmd = apm.MAVLink_command_long_message(1, 191, 31010, 0, 1, 0, 0, 0, 0, 0, 0)
+    parsed = apm.MAVLink(None).decode(bytearray(cmd.pack(gcs)))
+    frames = pipeline.on_message(parsed, taxi_messages[-1][0] + 0.1)
+    msgs = parse(frames)
+    acks = [m for m in msgs if m.get_type() == "COMMAND_ACK"]
+    assert len(acks) == 1 and acks[0].result == 0 and acks[0].command == 31010
+    assert acks[0].target_system == 255
+    assert all(m.get_srcComponent() == MAV_COMP_ID_ONBOARD_COMPUTER for m in msgs)
+    assert AlertCode.HDG_APPLIED in alert_codes(pipeline)
+    assert pipeline.engine.heading.correction_rad == pytest.approx(
+        math.radians(INJECTED_DEG), abs=math.radians(0.1)
+    )
+
+
+def test_correction_survives_a_service_restart_but_not_an_autopilot_reboot(taxi_messages):
+    cfg = Config()
+    cfg = replace(cfg, heading=replace(cfg.heading, auto_apply=True))
+    first = Pipeline(cfg)
+    k = 0
+    while AlertCode.HDG_APPLIED not in alert_codes(first):
+        first.on_message(taxi_messages[k][1], taxi_messages[k][0])
+        k += 1
+    saved = json.loads(json.dumps(first.engine.persistent_state()))
+    correction = first.engine.heading.correction_rad
+    assert correction != 0.0
+
+    # the service restarts during the same boot: the rest of the flight keeps the correction
+    second = Pipeline(cfg)
+    second.engine.restore(saved)
+    run(second, taxi_messages[k:])
+    assert second.engine.heading.correction_rad == correction
+    assert AlertCode.HDG_APPLIED not in alert_codes(second)
+
+    # the autopilot rebooted (its clock is behind the saved time): not restored
+    third = Pipeline(cfg)
+    third.engine.restore(saved)
+    run(third, taxi_messages[:2000])
+    assert third.engine.heading.correction_rad == 0.0
