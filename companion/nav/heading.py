@@ -123,7 +123,7 @@ STATE_VERSION = 1
 """Version of the :meth:`HeadingCorrector.to_state` dictionary layout."""
 
 
-TRACK_SOURCES = ("velocity", "position")
+TRACK_SOURCES = ("auto", "velocity", "position")
 """Allowed :attr:`HeadingConfig.track_source` values."""
 
 RATE_BASELINE_S = 0.5
@@ -176,7 +176,10 @@ class HeadingConfig:
         positions (millimetre-to-centimetre noise between epochs) it is one to
         two orders of magnitude less noisy than the Doppler velocity at taxi
         speeds; with a 3D fix it is worse. The S4 recursions and criteria are
-        the same.
+        the same. ``"auto"`` (the default): the position track while the fixes
+        are at least ``pos_min_fix_type``, the velocity track otherwise; the
+        source is chosen at the first cycle of a sample, and a position-track
+        sample that loses RTK starts over on the velocity track (never a mix).
     pos_baseline_s
         Time between the two fixes of a position track, s.
     pos_diff_sigma_m
@@ -192,14 +195,17 @@ class HeadingConfig:
     confidence
         Two-sided confidence of ``eps`` (S4: 0.95, i.e. 1.96 sigma).
     min_cycles
-        Fewest cycles before the sample is judged (the tests need a sample).
+        Fewest velocity-track cycles before the sample is judged (the tests need
+        a sample).
+    pos_min_cycles
+        The same for position-track cycles (one per ``pos_baseline_s``).
     max_cycles
         Cap on stored cycles (memory bound); beyond it the sample is judged as is.
     mean_spread_limit_deg
         Limit on the spread (1 sigma) of the running mean, deg (S4: 0.3).
     spread_start_cycle
         First cycle whose running mean enters the spread (the first running
-        means are single noisy cycles).
+        means are single noisy cycles); position track: ``pos_spread_start_cycle``.
     normality_alpha
         False-rejection probability of the normality test.
     dispersion_alpha
@@ -262,7 +268,7 @@ class HeadingConfig:
     default_vel_acc_mps: float = 0.1
     vel_acc_floor_mps: float = 0.02
     ins_yaw_noise_deg: float = 0.1
-    track_source: str = "velocity"
+    track_source: str = "auto"
     pos_baseline_s: float = 1.0
     pos_diff_sigma_m: float = 0.01
     pos_min_fix_type: FixType = FixType.RTK_FIXED
@@ -270,9 +276,11 @@ class HeadingConfig:
     eps_limit_deg: float = 0.05
     confidence: float = 0.95
     min_cycles: int = 100
+    pos_min_cycles: int = 30
     max_cycles: int = 50_000
     mean_spread_limit_deg: float = 0.3
     spread_start_cycle: int = 20
+    pos_spread_start_cycle: int = 10
     normality_alpha: float = 0.001
     dispersion_alpha: float = 0.001
     stationarity_alpha: float = 0.001
@@ -395,7 +403,12 @@ class HeadingConfig:
                 f"HeadingConfig.track_source must be one of {TRACK_SOURCES}, "
                 f"got {self.track_source!r}"
             )
-        if self.pos_baseline_s > self.settle_time_s and self.track_source == "position":
+        if not 2 <= self.pos_spread_start_cycle < self.pos_min_cycles:
+            raise ValueError(
+                "HeadingConfig.pos_spread_start_cycle must be in [2, pos_min_cycles), "
+                f"got {self.pos_spread_start_cycle!r}"
+            )
+        if self.pos_baseline_s > self.settle_time_s and self.track_source != "velocity":
             raise ValueError(
                 "HeadingConfig.pos_baseline_s must not exceed settle_time_s (the straight "
                 f"window must cover the baseline), got {self.pos_baseline_s!r}"
@@ -545,6 +558,8 @@ class HeadingCorrector:
         self.rejections: Counter[str] = Counter()
         """Cycles or inputs not used, by reason (counted and logged)."""
         self.reject_alerts = 0
+        self._source: str | None = None
+        """Track source of the current sample ("position" / "velocity"; None: not chosen)."""
 
     # ------------------------------------------------------------------ inputs
 
@@ -816,7 +831,7 @@ class HeadingCorrector:
         if len(self._x) >= cfg.max_cycles:
             self._reject("max_cycles")
             return
-        if cfg.track_source == "position":
+        if self._source_for(fix) == "position":
             got_pos = self._position_track(fix)
             if got_pos is None:
                 return
@@ -842,7 +857,7 @@ class HeadingCorrector:
         # unwrap about the running mean so that a mismatch near +-180 deg stays continuous
         x = dphi if self._stats.n == 0 else self._stats.mean + wrap_pi(dphi - self._stats.mean)
         self._stats = self._stats.update(x)
-        if self._stats.n >= cfg.spread_start_cycle:
+        if self._stats.n >= self._spread_start():
             self._mean_stats = self._mean_stats.update(self._stats.mean)
         self._t.append(t_cycle)
         self._x.append(x)
@@ -881,6 +896,29 @@ class HeadingCorrector:
         var = 2.0 * cfg.pos_diff_sigma_m**2 / dist**2
         return math.atan2(d_e, d_n), var, 0.5 * (fix.t_s + prev[0])
 
+    def _source_for(self, fix: GnssFix) -> str:
+        """The track source of this sample (fixed at its first cycle in ``auto``)."""
+        cfg = self.config
+        if cfg.track_source != "auto":
+            return cfg.track_source
+        want = "position" if fix.fix_type >= cfg.pos_min_fix_type else "velocity"
+        if self._source is None:
+            self._source = want
+        elif self._source == "position" and want == "velocity":
+            # RTK lost mid-sample: start over on the Doppler track rather than mix
+            self._reject("track_source_changed")
+            self._restart()
+            self._source = want
+        return self._source
+
+    def _min_cycles(self) -> int:
+        pos = self._source == "position" or self.config.track_source == "position"
+        return self.config.pos_min_cycles if pos else self.config.min_cycles
+
+    def _spread_start(self) -> int:
+        pos = self._source == "position" or self.config.track_source == "position"
+        return self.config.pos_spread_start_cycle if pos else self.config.spread_start_cycle
+
     def _end_leg(self) -> None:
         self._in_leg = False
         self._pos_prev = None
@@ -898,6 +936,7 @@ class HeadingCorrector:
         self._in_leg = False
         self._pos_prev = None
         self._candidate = None
+        self._source = None
 
     # park check -------------------------------------------------------------
 
@@ -981,7 +1020,7 @@ class HeadingCorrector:
     def _maybe_judge(self, t_s: float) -> list[Output]:
         cfg = self.config
         est = self.estimate()
-        if est.n < cfg.min_cycles or self._full_legs < cfg.min_legs:
+        if est.n < self._min_cycles() or self._full_legs < cfg.min_legs:
             return []
         if math.degrees(est.eps_rad) > cfg.eps_limit_deg and est.n < cfg.max_cycles:
             return []
@@ -1019,7 +1058,7 @@ class HeadingCorrector:
         leg = np.asarray(self._leg, dtype=np.int64)
         n = x.size
         d: dict[str, float] = {"n": float(n), "eps_deg": math.degrees(est.eps_rad)}
-        if n < cfg.min_cycles or math.degrees(est.eps_rad) > cfg.eps_limit_deg:
+        if n < self._min_cycles() or math.degrees(est.eps_rad) > cfg.eps_limit_deg:
             return Verdict(False, f"insufficient eps={math.degrees(est.eps_rad):.3f}", d)
         if cfg.require_park_check and self._park_ok is not True:
             reason = "no_park_check" if self._park_ok is None else "gnss_vel_bias"
@@ -1142,6 +1181,7 @@ class HeadingCorrector:
             "last_publish_t_s": self._last_publish_t,
             "rejections": dict(self.rejections),
             "reject_alerts": self.reject_alerts,
+            "source": self._source,
         }
 
     @classmethod
@@ -1177,6 +1217,10 @@ class HeadingCorrector:
             obj._last_publish_t = None if last is None else float(last)
             obj.rejections = Counter({str(k): int(v) for k, v in state["rejections"].items()})
             obj.reject_alerts = int(state["reject_alerts"])
+            source = state.get("source")
+            if source is not None and source not in TRACK_SOURCES:
+                raise ValueError(f"heading state malformed: source {source!r}")
+            obj._source = source
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"heading state malformed: {exc!r}") from exc
         lengths = {len(obj._t), len(obj._x), len(obj._sig), len(obj._leg)}

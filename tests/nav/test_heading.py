@@ -322,7 +322,7 @@ def test_position_track_source_is_accurate_and_fast_with_rtk_positions() -> None
     """
     segs = [PARK, Segment(40.0, 4.0), Segment(9.0, 3.0, 10.0), Segment(40.0, 4.0)]
     kw = dict(heading_error_deg=-1.3, vel_noise_mps=0.2, fix_type=FixType.RTK_FIXED)
-    vel_hc = HeadingCorrector()
+    vel_hc = HeadingCorrector(HeadingConfig(track_source="velocity"))
     assert alerts(run(vel_hc, taxi_stream(segs, seed=40, **kw)), AlertCode.HDG_READY) == []
     # one cycle per second: fewer cycles make a sample than at 10 Hz
     cfg = HeadingConfig(track_source="position", min_cycles=30, spread_start_cycle=10)
@@ -338,6 +338,42 @@ def test_position_track_source_is_accurate_and_fast_with_rtk_positions() -> None
         # error within its 95 % accuracy, 2x margin for the 5 draws
         err = hc.candidate.correction_rad - math.radians(-1.3)
         assert abs(err) <= 2.0 * hc.candidate.eps_rad, (seed, math.degrees(err))
+
+
+def test_auto_source_takes_the_position_track_with_rtk_and_velocity_without() -> None:
+    segs = [PARK, Segment(40.0, 4.0), Segment(9.0, 3.0, 10.0), Segment(40.0, 4.0)]
+    rtk = HeadingCorrector()  # default: auto
+    out = run(
+        rtk,
+        taxi_stream(
+            segs, seed=40, heading_error_deg=-1.3, vel_noise_mps=0.2, fix_type=FixType.RTK_FIXED
+        ),
+    )
+    assert rtk._source == "position" and alerts(out, AlertCode.HDG_READY)
+    dgps = HeadingCorrector()
+    run(dgps, taxi_stream(segs, seed=40, fix_type=FixType.DGPS))
+    assert dgps._source == "velocity" and dgps.estimate().n > 100
+
+
+def test_auto_source_starts_over_on_the_velocity_track_when_rtk_is_lost() -> None:
+    from dataclasses import replace as dc_replace
+
+    stream = taxi_stream([PARK, Segment(40.0, 4.0)], seed=42, fix_type=FixType.RTK_FIXED)
+    rtk_lost_at = 12.0 + 20.0  # half way down the leg the corrections drop out
+    stream.samples = [
+        dc_replace(s, fix_type=FixType.FIX_3D)
+        if isinstance(s, GnssFix) and s.t_s >= rtk_lost_at
+        else s
+        for s in stream.samples
+    ]
+    hc = HeadingCorrector()
+    run(hc, stream)
+    assert hc.rejections["track_source_changed"] == 1
+    assert hc._source == "velocity"
+    # every cycle kept is a velocity cycle after the loss: none of the 1 s position ones
+    times = hc.cycle_times_s()
+    assert times.size > 50 and times.min() >= rtk_lost_at
+    assert np.all(np.diff(times) < 0.5)
 
 
 def test_position_track_needs_the_fix_type() -> None:
