@@ -1,0 +1,446 @@
+"""Synthetic approaches with injected GNSS faults, to test and benchmark the monitor cheaply.
+
+An approach is a straight 3 deg glide towards the runway threshold (the local
+NED origin, at the field elevation) with a wandering velocity (first-order
+Gauss-Markov per axis: turbulence and small corrections). One or two receivers
+see it with the simulator's GNSS error model (per-axis first-order
+Gauss-Markov with the mode's sigma and correlation time,
+:data:`companion.sim.sensors.GNSS_MODE_SPECS`), plus an injected fault on
+receiver 0 (step, ramp or dither, as the simulator's events).
+
+The navigator is :class:`CvKalman`, a constant-velocity Kalman filter that
+fuses every fix of every receiver (as the GNSS/INS blend does): it follows a
+slow ramp, which is the point of S3. Its process noise is derived from the
+truth's velocity wander (``q = 2 sigma_v^2 / tau_v``), so its innovation
+statistics are honest. No IMU, no 400 Hz loop: ten hours of approaches run in
+minutes, which is what the Monte Carlo bench needs.
+
+References
+----------
+SEEDS.md S3 (4 cm/s ramp, 1 m dither); S1 (GNSS mode accuracies, via the
+simulator's table); Bar-Shalom, Li, Kirubarajan (2001) sec. 6.2 (the
+constant-velocity model).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from companion.engine import gnss_measurement
+from companion.integrity.monitor import IntegrityMonitor
+from companion.nav.frames import LocalFrame
+from companion.nav.navigator import GnssMeasurement, GnssUpdate
+from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
+from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
+from companion.types import (
+    Alert,
+    AlertCode,
+    FixType,
+    FloatArray,
+    GnssFix,
+    LandedState,
+    LandedStateSample,
+    NavMode,
+    NavSolution,
+    Output,
+    Sample,
+)
+
+FAULT_KINDS = ("step", "ramp", "dither")
+
+
+@dataclass(frozen=True, slots=True)
+class Fault:
+    """A fault on one receiver from ``t_start_s`` to the end of the run.
+
+    step: constant ``vector_ned`` (m); ramp: ``vector_ned`` (m/s) times the time
+    since the start; dither: ``amplitude_m`` sin(2 pi tau / ``period_s``) along
+    ``vector_ned`` (normalised).
+    """
+
+    kind: str
+    t_start_s: float
+    vector_ned: tuple[float, float, float]
+    amplitude_m: float = 0.0
+    period_s: float = 20.0
+    receiver_id: int = 0
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {FAULT_KINDS}")
+        if not math.isfinite(self.t_start_s):
+            raise ValueError("t_start_s must be finite")
+        if self.kind == "dither" and not (self.period_s > 0.0 and self.amplitude_m > 0.0):
+            raise ValueError("a dither needs period_s > 0 and amplitude_m > 0")
+
+    def offset_ned_m(self, t_s: FloatArray) -> FloatArray:
+        """The fault's position offset at times ``t_s`` (n,), m, shape (n, 3)."""
+        t = np.asarray(t_s, dtype=float)
+        tau = t - self.t_start_s
+        on = (tau >= 0.0).astype(float)[:, None]
+        vec = np.asarray(self.vector_ned, dtype=float)[None, :]
+        if self.kind == "step":
+            return on * vec
+        if self.kind == "ramp":
+            return on * vec * np.maximum(tau, 0.0)[:, None]
+        axis = vec / np.linalg.norm(vec)
+        return on * self.amplitude_m * np.sin(2.0 * math.pi * tau / self.period_s)[:, None] * axis
+
+    def size_m(self, t_s: float) -> float:
+        """Magnitude of the offset at ``t_s``, m (for a dither: its amplitude once started)."""
+        if t_s < self.t_start_s:
+            return 0.0
+        if self.kind == "dither":
+            return self.amplitude_m
+        return float(np.linalg.norm(self.offset_ned_m(np.array([t_s]))[0]))
+
+
+@dataclass(frozen=True, slots=True)
+class ApproachSpec:
+    """One synthetic approach."""
+
+    duration_s: float = 115.0
+    speed_mps: float = 70.0
+    glide_deg: float = 3.0
+    start_height_m: float = 440.0
+    field_elevation_msl_m: float = 110.0
+    gnss_mode: str = "rtk_fixed"
+    rate_hz: float = 10.0
+    receivers: int = 2
+    vel_wander_h_mps: float = 1.0
+    vel_wander_v_mps: float = 0.3
+    vel_wander_tau_s: float = 10.0
+    fuse_all: bool = False
+    """False: the navigator fuses the first receiver not excluded (the primary; the other is
+    the independent solution); True: it fuses every receiver not excluded."""
+    faults: tuple[Fault, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        if self.gnss_mode not in GNSS_MODE_SPECS or self.gnss_mode == "none":
+            raise ValueError("gnss_mode must be a usable GNSS mode")
+        if self.receivers not in (1, 2):
+            raise ValueError("receivers must be 1 or 2")
+        for name in ("duration_s", "speed_mps", "rate_hz", "vel_wander_tau_s"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0")
+
+
+class CvKalman:
+    """Constant-velocity Kalman filter on 3 independent axes, fusing position fixes.
+
+    State per axis (position m, velocity m/s); white acceleration noise of
+    spectral density ``q`` (m^2/s^3) per axis. ``on_gnss`` returns the
+    position innovation record the monitor reads.
+
+    References
+    ----------
+    Bar-Shalom, Li, Kirubarajan (2001) sec. 6.2.2 (continuous white-noise acceleration).
+    """
+
+    def __init__(self, q_m2ps3: FloatArray, gate_false_alarm_prob: float = 1e-4) -> None:
+        self.q = np.asarray(q_m2ps3, dtype=float)
+        self.gate = float(chi2.isf(gate_false_alarm_prob, 3))
+        self.t_s: float | None = None
+        self.x = np.zeros((3, 2))
+        self.p = np.zeros((3, 2, 2))
+        self.rejects = 0
+
+    def init(self, t_s: float, pos: FloatArray, vel: FloatArray, var_pos: FloatArray) -> None:
+        """Start from a position (with its variance) and a velocity (variance 1 m^2/s^2)."""
+        self.t_s = t_s
+        self.x[:, 0] = pos
+        self.x[:, 1] = vel
+        self.p[:] = 0.0
+        self.p[:, 0, 0] = var_pos
+        self.p[:, 1, 1] = 1.0
+
+    def _predicted(self, t_s: float) -> tuple[FloatArray, FloatArray]:
+        if self.t_s is None:
+            raise ValueError("filter not initialised")
+        dt = t_s - self.t_s
+        x = self.x.copy()
+        x[:, 0] += dt * x[:, 1]
+        p = self.p.copy()
+        p00 = p[:, 0, 0] + 2 * dt * p[:, 0, 1] + dt * dt * p[:, 1, 1] + self.q * dt**3 / 3.0
+        p01 = p[:, 0, 1] + dt * p[:, 1, 1] + self.q * dt**2 / 2.0
+        p11 = p[:, 1, 1] + self.q * dt
+        p[:, 0, 0], p[:, 0, 1], p[:, 1, 0], p[:, 1, 1] = p00, p01, p01, p11
+        return x, p
+
+    def predict(self, t_s: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Position, velocity (3,) and their diagonal covariances (3, 3) at ``t_s``."""
+        x, p = self._predicted(t_s)
+        return x[:, 0].copy(), x[:, 1].copy(), np.diag(p[:, 0, 0]), np.diag(p[:, 1, 1])
+
+    def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
+        """Gate and fuse one position fix."""
+        x, p = self._predicted(meas.t_s)
+        r = meas.pos_var_ned_m2
+        innov = meas.pos_ned_m - x[:, 0]
+        s = p[:, 0, 0] + r
+        nis = float(np.sum(innov * innov / s))
+        s_cov = np.diag(s)
+        if gate and nis > self.gate:
+            self.rejects += 1
+            return GnssUpdate(meas.t_s, False, nis, 3, self.gate, innov, s_cov, "gate")
+        self.rejects = 0
+        k0 = p[:, 0, 0] / s
+        k1 = p[:, 0, 1] / s
+        x[:, 0] += k0 * innov
+        x[:, 1] += k1 * innov
+        p00 = (1 - k0) * p[:, 0, 0]
+        p01 = (1 - k0) * p[:, 0, 1]
+        p11 = p[:, 1, 1] - k1 * p[:, 0, 1]
+        p[:, 0, 0], p[:, 0, 1], p[:, 1, 0], p[:, 1, 1] = p00, p01, p01, p11
+        self.x, self.p, self.t_s = x, p, meas.t_s
+        return GnssUpdate(meas.t_s, True, nis, 3, self.gate, innov, s_cov)
+
+
+@dataclass(frozen=True, slots=True)
+class RunResult:
+    """What one synthetic run gives the scorer.
+
+    ``first_alert_s``: time of the monitor's first FAULT or INTEGRITY-lost alert at or
+    after ``t_from_s`` (None: none); ``alerts``: all FAULT/INTEGRITY-lost alert times;
+    ``baseline_first_s`` / ``baseline_alerts``: the same for a plain innovation chi-square
+    monitor (an alert at each onset of NIS above ``chi2^-1(1 - P_fa, 3)``).
+    """
+
+    first_alert_s: float | None
+    alerts: tuple[float, ...]
+    baseline_first_s: float | None
+    baseline_alerts: tuple[float, ...]
+    hours: float
+    monitor: IntegrityMonitor
+    first_alert_text: str = ""
+    """The text of the first alert counted in ``first_alert_s`` (which test fired)."""
+
+
+def truth_and_fixes(
+    spec: ApproachSpec, rng: np.random.Generator
+) -> tuple[FloatArray, FloatArray, FloatArray, list[FloatArray], FloatArray]:
+    """Times (n,), truth position (n, 3), truth velocity (n, 3), per-receiver fix positions
+    (n, 3) each, and the per-axis fix variance (3,), for one approach."""
+    n = int(round(spec.duration_s * spec.rate_hz)) + 1
+    dt = 1.0 / spec.rate_hz
+    t: FloatArray = np.arange(n, dtype=float) * dt
+    gamma = math.radians(spec.glide_deg)
+    v0 = np.array([spec.speed_mps * math.cos(gamma), 0.0, spec.speed_mps * math.sin(gamma)])
+    wander = np.column_stack(
+        (
+            gauss_markov_fast(rng, n, dt, spec.vel_wander_h_mps, spec.vel_wander_tau_s, 2),
+            gauss_markov_fast(rng, n, dt, spec.vel_wander_v_mps, spec.vel_wander_tau_s, 1),
+        )
+    )
+    vel: FloatArray = v0[None, :] + wander
+    start = np.array(
+        [-spec.start_height_m / math.tan(gamma), 0.0, -spec.start_height_m], dtype=float
+    )
+    pos: FloatArray = start[None, :] + np.vstack(
+        (np.zeros(3), np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt, 0))
+    )
+    mode = GNSS_MODE_SPECS[spec.gnss_mode]
+    var: FloatArray = np.array([mode.sigma_h_m**2, mode.sigma_h_m**2, mode.sigma_v_m**2])
+    fixes: list[FloatArray] = []
+    for rid in range(spec.receivers):
+        err = np.column_stack(
+            (
+                gauss_markov_fast(rng, n, dt, mode.sigma_h_m, mode.tau_s, 2),
+                gauss_markov_fast(rng, n, dt, mode.sigma_v_m, mode.tau_s, 1),
+            )
+        )
+        fix = pos + err
+        for fault in spec.faults:
+            if fault.receiver_id == rid:
+                fix = fix + fault.offset_ned_m(t)
+        fixes.append(fix)
+    return t, pos, vel, fixes, var
+
+
+def run_approach(
+    spec: ApproachSpec,
+    monitor: IntegrityMonitor,
+    rng: np.random.Generator,
+    t_from_s: float = 0.0,
+    baseline_false_alarm_prob: float | None = None,
+    t_offset_s: float = 0.0,
+) -> RunResult:
+    """Fly one approach through :class:`CvKalman` and ``monitor`` (and the plain baseline).
+
+    ``t_offset_s`` shifts every time (a sequence of approaches on one clock); the
+    monitor is reset first. The engine's rule is followed: fixes of an excluded
+    receiver are not offered to the navigator, but still go to the monitor. The
+    baseline has its own navigator with the same fusion policy and no exclusions (what a
+    system with only the innovation test would fly).
+    """
+    cfg = monitor.config
+    p_fa = cfg.false_alarm_prob if baseline_false_alarm_prob is None else baseline_false_alarm_prob
+    base_th = float(chi2.isf(p_fa, 3))
+    t, pos, vel, fixes, var = truth_and_fixes(spec, rng)
+    t = t + t_offset_s
+    mode = GNSS_MODE_SPECS[spec.gnss_mode]
+    wander = np.array([spec.vel_wander_h_mps, spec.vel_wander_h_mps, spec.vel_wander_v_mps])
+    q = 2.0 * wander**2 / spec.vel_wander_tau_s
+    nav = CvKalman(q)
+    nav.init(float(t[0]), fixes[0][0], vel[0], var)
+    plain = CvKalman(q)  # the baseline's navigator: same fusion policy, never excludes
+    plain.init(float(t[0]), fixes[0][0], vel[0], var)
+    monitor.reset()
+    alerts: list[float] = []
+    texts: list[str] = []
+    base_alerts: list[float] = []
+    base_high = [False] * spec.receivers
+    nan3 = np.full(3, np.nan)
+    field_elev = spec.field_elevation_msl_m
+    for k in range(1, t.size):
+        tk = float(t[k])
+        outputs: list[Output] = []
+        fused_one = False
+        for rid in range(spec.receivers):
+            p_fix = fixes[rid][k]
+            meas = GnssMeasurement(tk, p_fix, var, nan3, nan3, mode.fix_type, rid)
+            gfix = _fix(tk, rid, mode.fix_type)
+            update: GnssUpdate | None = None
+            if not monitor.exclude(rid) and (spec.fuse_all or not fused_one):
+                fused_one = True
+                update = nav.on_gnss(meas)
+            if spec.fuse_all or rid == 0:
+                high = plain.on_gnss(meas).nis > base_th
+                if high and not base_high[rid]:
+                    base_alerts.append(tk)
+                base_high[rid] = high
+            outputs += monitor.on_fix(gfix, meas, update)
+        p_nav, v_nav, p_cov, v_cov = nav.predict(tk)
+        sol = NavSolution(
+            t_s=tk,
+            lat_rad=0.0,
+            lon_rad=0.0,
+            alt_msl_m=field_elev - float(p_nav[2]),
+            vel_ned_mps=v_nav,
+            pos_cov_ned_m2=p_cov,
+            vel_cov_ned_m2ps2=v_cov,
+            yaw_rad=None,
+            mode=NavMode.NORMAL,
+            fix_type=mode.fix_type,
+            satellites=mode.satellites,
+        )
+        outputs += monitor.on_solution(sol)
+        for out in outputs:
+            if isinstance(out, Alert) and _is_alarm(out):
+                alerts.append(out.t_s)
+                texts.append(out.text)
+    t_from = t_from_s + t_offset_s
+    i_first = next((i for i, a in enumerate(alerts) if a >= t_from), None)
+    first = alerts[i_first] if i_first is not None else None
+    first_text = texts[i_first] if i_first is not None else ""
+    base_first = next((a for a in base_alerts if a >= t_from), None)
+    hours = (float(t[-1]) - float(t[0])) / 3600.0
+    return RunResult(
+        first, tuple(alerts), base_first, tuple(base_alerts), hours, monitor, first_text
+    )
+
+
+def _is_alarm(alert: Alert) -> bool:
+    """A FAULT alert, or an INTEGRITY alert that announces a loss (not a restoration)."""
+    if alert.code is AlertCode.FAULT:
+        return True
+    return alert.code is AlertCode.INTEGRITY and alert.text.startswith("lost")
+
+
+def _fix(t_s: float, rid: int, fix_type: FixType) -> GnssFix:
+    return GnssFix(
+        t_s=t_s,
+        t_rx_s=t_s,
+        receiver_id=rid,
+        fix_type=fix_type,
+        lat_rad=0.0,
+        lon_rad=0.0,
+        alt_msl_m=0.0,
+        alt_hae_m=None,
+        vel_ne_mps=None,
+        ground_speed_mps=0.0,
+        course_rad=None,
+        h_acc_m=None,
+        v_acc_m=None,
+        vel_acc_mps=None,
+        hdop=None,
+        vdop=None,
+        satellites=None,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class SampleRunResult:
+    """Alarms of :func:`run_samples`: (t_s, code, text) of every FAULT / INTEGRITY-lost alert,
+    every alert, and the monitor after the run."""
+
+    alarms: tuple[tuple[float, str, str], ...]
+    alerts: tuple[Alert, ...]
+    monitor: IntegrityMonitor
+
+
+def run_samples(
+    samples: Sequence[Sample], monitor: IntegrityMonitor, publish_rate_hz: float = 10.0
+) -> SampleRunResult:
+    """Drive the monitor with a simulated flight's typed samples, without the engine.
+
+    The navigator is the GNSS pass-through (:class:`PassthroughNavigator`) fed with the
+    first receiver not excluded (the primary); every fix goes to the monitor; a
+    solution is published at ``publish_rate_hz`` on the fix clock with the autopilot's
+    landed state as the phase hint. This is the monitor's own path through a flight,
+    for tests and the bench; the engine wires the same calls.
+    """
+    nav = PassthroughNavigator(PassthroughConfig())
+    frame: LocalFrame | None = None
+    landed: LandedState | None = None
+    alerts: list[Alert] = []
+    tick = -1
+    last_t: dict[int, float] = {}
+    monitor.reset()
+    for sample in samples:
+        if isinstance(sample, LandedStateSample):
+            landed = sample.landed_state
+            continue
+        if not isinstance(sample, GnssFix) or int(sample.fix_type) < int(FixType.FIX_3D):
+            continue
+        if frame is None:
+            frame = LocalFrame(sample.lat_rad, sample.lon_rad, sample.alt_msl_m)
+        meas = gnss_measurement(sample, frame)
+        rid = sample.receiver_id
+        last_t[rid] = sample.t_s
+        primary = min(
+            (r for r in last_t if not monitor.exclude(r) and sample.t_s - last_t[r] < 1.0),
+            default=None,
+        )
+        update: GnssUpdate | None = None
+        if rid == primary:
+            update = nav.on_gnss(meas, gate=nav.initialised)
+        outs = monitor.on_fix(sample, meas, update)
+        k = math.floor(sample.t_s * publish_rate_hz + 1e-6)
+        if k > tick and nav.initialised:
+            tick = k
+            state = nav.predict(sample.t_s)
+            if state is not None:
+                lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
+                sol = NavSolution(
+                    t_s=sample.t_s,
+                    lat_rad=lat,
+                    lon_rad=lon,
+                    alt_msl_m=alt,
+                    vel_ned_mps=state.vel_ned_mps,
+                    pos_cov_ned_m2=state.pos_cov_ned_m2,
+                    vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
+                    yaw_rad=None,
+                    mode=NavMode.NORMAL,
+                    fix_type=sample.fix_type,
+                    satellites=sample.satellites or 0,
+                )
+                outs += monitor.on_solution(sol, landed)
+        alerts += [o for o in outs if isinstance(o, Alert)]
+    alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
+    return SampleRunResult(alarms, tuple(alerts), monitor)
