@@ -1,0 +1,951 @@
+"""Adaptive GNSS/INS blend: an error-state Kalman filter with delayed GNSS fusion (S1).
+
+States (estimate minus truth, see :mod:`companion.nav.ins`): position (0:3, m),
+velocity (3:6, m/s), attitude error psi (6:9, rad), accelerometer bias
+(9:12, m/s^2), gyro bias (12:15, rad/s), and the receiver's own position
+error (15:18, m, see below). Loose coupling as in S1: the GNSS
+receiver's position and velocity are the measurements, with R from the
+accuracies it reports.
+
+GNSS position errors are time-correlated (an RTK or DGPS error wanders over
+tens of seconds; between 5-10 Hz fixes it looks like signal). Treated as
+white, they make the filter average them away and claim a position
+covariance ten to fifty times too small (NEES 40-65 on the simulator's RTK
+approach). So by default (``gnss_error_model="gauss_markov"``) the state also
+holds the receiver's position error (states 15:18) as a first-order
+Gauss-Markov process of the reported variance and a per-fix-type correlation
+time (:data:`GNSS_ERR_TAU_S`), plus a small white part
+(``gnss_white_fraction`` of the reported variance, floored); the block is
+re-initialised when the fix type changes. ``"white"`` keeps the classical
+loose coupling (the reported variance as white R).
+
+Timing (the ArduPilot EKF3 pattern):
+
+* every IMU sample advances the nominal state (plain floats, microseconds);
+* every ``cov_interval_s`` (default 0.1 s) the 18x18 covariance is
+  propagated once through the segment, with F evaluated at the segment's
+  mean NED specific force, discretised to second order (trapezoidal Qd) or
+  by Van Loan (``cov_discretisation``); the segment's
+  (t, nominal state, P, Phi, Qd) is pushed into a ring buffer of
+  ``history_s`` seconds;
+* a GNSS fix valid at ``t_m`` (older than the newest IMU sample) is compared
+  with the buffered nominal state at ``t_m`` (Hermite interpolation between
+  snapshots) using the buffered covariance of the segment containing
+  ``t_m``; the correction is carried forward to the newest IMU time through
+  the buffered transition matrices (dx_{i+1} = Phi_i dx_i) and the
+  covariance re-propagated through the buffered (Phi_i, Qd_i) -- exact for
+  the linear error model -- and the buffered snapshots are corrected too.
+
+Adaptive noise (S1, Mohamed & Schwarz 1999). Variant implemented and why:
+
+* R: the **residual form** R = C_v + H P+ H^T, not the innovation form
+  R = C_eta - H P- H^T. The innovation form subtracts two comparable
+  positive matrices and goes indefinite whenever the window's sample
+  covariance happens to be small (common with N = 25 and centimetre RTK);
+  the residual form is a sum of positive semi-definite terms, so the
+  estimate stays positive by construction and is unbiased at the filter's
+  fixed point (E[v v^T] = R - H P+ H^T). It is estimated per position
+  component as a **scale on the receiver's reported variance** (the window
+  mean of (v_i^2 + (H P+ H^T)_ii) / R_i, R_i the white R the model used;
+  the scale multiplies both the white part and the receiver-error states'
+  variance), so a step in the reported
+  accuracy (RTK fixed -> float) is followed at once instead of after N
+  epochs; the scale is bounded (``r_scale_bounds``) and R floored.
+* Q: S1's Q = K C_eta K^T is only the first term of Mohamed & Schwarz's
+  estimator; the full one, Q = mean(dx dx^T) + P+_k - Phi P+_{k-1} Phi^T,
+  equals Q_used + K (eta eta^T - S) K^T per epoch, which is what is
+  windowed here. Only its velocity block is used -- the one that the
+  accelerometer white noise drives directly -- to re-estimate the
+  accelerometer noise density per NED axis, bounded by ``q_scale_bounds``
+  times the configured value. Bias and attitude noises stay at their
+  configured values (too weakly observable over 25 epochs to adapt).
+* Which innovations feed which estimate: R and Q estimated jointly from the
+  same innovations are not separately identifiable (Mehra 1972), and on
+  simulated flights adapting the velocity R together with Q drifted (Q too
+  low, velocity R too high, each excusing the other). So R is adapted from
+  the **position** residuals (where R dominates: between 5-10 Hz fixes the
+  INS prediction error is far below the receiver noise) and Q from the
+  **velocity** innovations, with the receiver's velocity accuracy taken as
+  reported (floored).
+* Floors: by default neither R nor Q may fall below the receiver's report
+  and the IMU specification (``r_scale_bounds`` and ``q_scale_bounds`` start
+  at 1). GNSS position errors are time-correlated (RTK and DGPS errors wander
+  over tens of seconds): between 5-10 Hz fixes they look like signal, the
+  residuals come out far smaller than the true error, and an unfloored
+  window shrinks R twenty-fold (measured on the simulator's RTK-fixed
+  approach with the white error model), after which the filter follows the wandering error and
+  mis-estimates the accelerometer biases that carry the next outage. A
+  window can reliably tell only that noise is *larger* than modelled, which
+  is also the direction that keeps the bridging covariance honest. With
+  white noise (e.g. ``r_scale_bounds=(0.05, 20)``) the estimator follows the
+  truth both ways (tests/nav/test_blend.py).
+
+``BlendConfig(adaptive=False)`` is the non-adaptive baseline.
+
+References
+----------
+SEEDS.md S1 (blend equations, adaptive R and Q, moving window N = 20-30);
+Mohamed & Schwarz, J. Geodesy 73 (1999) eq. 20-28; Mehra, "Approaches to adaptive
+filtering", IEEE TAC 17(5), 1972 (identifiability of Q and R); Van Loan (1978);
+ArduPilot AP_NavEKF3 (fusion at the delayed horizon, output predictor).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from companion.nav import ins
+from companion.nav.frames import LocalFrame, euler_to_quat, quat_to_euler, skew
+from companion.nav.kalman import (
+    Correction,
+    InnovationWindow,
+    chi2_gate,
+    discretise_second_order,
+    joseph_update,
+    predict_covariance,
+    van_loan,
+)
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.types import AttitudeSample, FixType, FloatArray, ImuSample
+
+log = logging.getLogger(__name__)
+
+_DEG = math.pi / 180.0
+_HOUR_S = 3600.0
+
+FALLBACK_STD_M: dict[FixType, tuple[float, float]] = {
+    FixType.RTK_FIXED: (0.02, 0.03),
+    FixType.RTK_FLOAT: (0.30, 0.54),
+    FixType.DGPS: (1.0, 2.0),
+    FixType.FIX_3D: (4.0, 6.0),
+    FixType.FIX_2D: (6.0, 30.0),
+    FixType.STATIC: (0.02, 0.03),
+    FixType.PPP: (0.3, 0.5),
+}
+"""Horizontal and vertical 1-sigma position accuracy (m) assumed per fix type when the
+receiver reported none (S1: fixed 1.6-2.2 cm 2-D / 2.8-3.4 cm height, float 26-32 / 53-54 cm,
+without corrections > 3.5-4 m)."""
+
+GNSS_ERR_TAU_S: dict[FixType, float] = {
+    FixType.RTK_FIXED: 30.0,
+    FixType.RTK_FLOAT: 60.0,
+    FixType.DGPS: 120.0,
+    FixType.FIX_3D: 300.0,
+    FixType.FIX_2D: 300.0,
+    FixType.STATIC: 30.0,
+    FixType.PPP: 120.0,
+}
+"""Correlation time (s) of the receiver's position error per fix type: multipath and
+residual atmospheric errors wander over tens of seconds to minutes; the order of magnitude
+matters more than the figure (see the module docstring)."""
+
+N_STATE = ins.N_ERR + 3
+"""Blend state size: the 15 INS error states and the GNSS position error (15:18, NED, m)."""
+IGB = ins.N_ERR
+
+
+@dataclass(frozen=True, slots=True)
+class BlendConfig:
+    """Configuration of :class:`BlendNavigator` (SI units; noise densities per sqrt(s))."""
+
+    mode: str = "attitude_aided"
+    """``"attitude_aided"`` (autopilot ATTITUDE rotates the specific force) or ``"strapdown"``."""
+    adaptive: bool = True
+    """Adaptive R and Q (S1); False gives the non-adaptive baseline."""
+    adaptive_window: int = 25
+    """Moving-window length N in GNSS epochs (S1: 20-30)."""
+    adaptive_min_epochs: int = 10
+    """Epochs in the window before the adaptive estimates are used."""
+    lever_arm_b_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """GNSS antenna position relative to the IMU, body FRD axes, m."""
+    accel_vrw_mps_rts: float = 0.03 / 60.0
+    """Accelerometer white noise (velocity random walk), m/s/sqrt(s)."""
+    gyro_arw_rad_rts: float = 0.05 * _DEG / 60.0
+    """Gyro white noise (angle random walk), rad/sqrt(s)."""
+    accel_bias_sigma_mps2: float = 1e-3 * 9.80665
+    """Accelerometer bias 1-sigma (Gauss-Markov steady state), m/s^2."""
+    accel_bias_tau_s: float = 3600.0
+    """Accelerometer bias correlation time, s (inf = random constant + walk)."""
+    gyro_bias_sigma_radps: float = 5.0 * _DEG / _HOUR_S
+    """Gyro bias 1-sigma, rad/s."""
+    gyro_bias_tau_s: float = 3600.0
+    """Gyro bias correlation time, s."""
+    att_err_sigma_rad: tuple[float, float, float] = (0.1 * _DEG, 0.1 * _DEG, 0.5 * _DEG)
+    """Attitude-aided mode: autopilot attitude error 1-sigma about N, E, D axes, rad."""
+    att_err_tau_s: float = 60.0
+    """Attitude-aided mode: correlation time of the autopilot attitude error, s."""
+    init_att_sigma_rad: tuple[float, float, float] = (0.5 * _DEG, 0.5 * _DEG, 2.0 * _DEG)
+    """Strapdown mode: initial attitude error 1-sigma about N, E, D, rad."""
+    init_vel_sigma_mps: float = 1.0
+    """Initial velocity 1-sigma when the first fix has none, m/s."""
+    gate_false_alarm_prob: float = 1e-4
+    """Probability that a consistent fix fails the innovation chi-square gate."""
+    gnss_error_model: str = "gauss_markov"
+    """``"gauss_markov"`` (receiver position error as 3 correlated states) or ``"white"``."""
+    gnss_white_fraction: float = 0.1
+    """Gauss-Markov model: share of the reported variance taken as white noise."""
+    gnss_err_tau_s: float | None = None
+    """Gauss-Markov model: correlation time, s (None: per fix type, GNSS_ERR_TAU_S)."""
+    pos_std_floor_m: tuple[float, float] = (0.01, 0.015)
+    """Floor of the horizontal and vertical position measurement 1-sigma, m."""
+    vel_std_floor_mps: float = 0.02
+    """Floor of the velocity measurement 1-sigma, m/s."""
+    vel_std_fallback_mps: float = 0.3
+    """Velocity 1-sigma used when the receiver reported none, m/s."""
+    r_scale_bounds: tuple[float, float] = (1.0, 20.0)
+    """Bounds of the adaptive scale on the reported measurement variances. The default
+    floor 1 never lets R fall below what the receiver reports (see the module docstring)."""
+    q_scale_bounds: tuple[float, float] = (1.0, 100.0)
+    """Bounds of the adaptive accelerometer noise PSD, as multiples of the configured one
+    (default floor 1: never below the IMU's specification)."""
+    cov_interval_s: float = 0.1
+    """Covariance propagation interval, s (the nominal state advances per IMU sample)."""
+    cov_discretisation: str = "second_order"
+    """``"second_order"`` (Phi to second order, trapezoidal Qd: third-order error in
+    ||F|| dt, about 1e-3 relative at 0.1 s) or ``"van_loan"`` (exact for constant F)."""
+    history_s: float = 1.5
+    """Length of the state/covariance ring buffer: the oldest fix time that can be fused, s."""
+    max_imu_gap_s: float = 0.5
+    """IMU gaps longer than this are integrated but counted and logged, s."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("attitude_aided", "strapdown"):
+            raise ValueError(f"mode must be 'attitude_aided' or 'strapdown', got {self.mode!r}")
+        if not 2 <= self.adaptive_window <= 1000:
+            raise ValueError("adaptive_window must be in [2, 1000]")
+        if not 1 <= self.adaptive_min_epochs <= self.adaptive_window:
+            raise ValueError("adaptive_min_epochs must be in [1, adaptive_window]")
+        if len(self.lever_arm_b_m) != 3 or not all(math.isfinite(c) for c in self.lever_arm_b_m):
+            raise ValueError("lever_arm_b_m must be 3 finite numbers")
+        for name in (
+            "accel_vrw_mps_rts",
+            "gyro_arw_rad_rts",
+            "accel_bias_sigma_mps2",
+            "accel_bias_tau_s",
+            "gyro_bias_sigma_radps",
+            "gyro_bias_tau_s",
+            "att_err_tau_s",
+            "init_vel_sigma_mps",
+            "vel_std_floor_mps",
+            "vel_std_fallback_mps",
+            "cov_interval_s",
+            "history_s",
+            "max_imu_gap_s",
+        ):
+            value = getattr(self, name)
+            if not value > 0.0 or math.isnan(value):
+                raise ValueError(f"{name} must be > 0, got {value}")
+        for name in ("att_err_sigma_rad", "init_att_sigma_rad", "pos_std_floor_m"):
+            value = getattr(self, name)
+            if not all(c > 0.0 and math.isfinite(c) for c in value):
+                raise ValueError(f"{name} must hold positive finite numbers, got {value}")
+        if not 0.0 < self.gate_false_alarm_prob < 1.0:
+            raise ValueError("gate_false_alarm_prob must be in (0, 1)")
+        for name in ("r_scale_bounds", "q_scale_bounds"):
+            lo, hi = getattr(self, name)
+            if not 0.0 < lo <= 1.0 <= hi:
+                raise ValueError(f"{name} must satisfy 0 < low <= 1 <= high, got {(lo, hi)}")
+        if self.gnss_error_model not in ("gauss_markov", "white"):
+            raise ValueError(
+                f"gnss_error_model must be 'gauss_markov' or 'white', got {self.gnss_error_model!r}"
+            )
+        if not 0.0 < self.gnss_white_fraction <= 1.0:
+            raise ValueError("gnss_white_fraction must be in (0, 1]")
+        if self.gnss_err_tau_s is not None and not (
+            math.isfinite(self.gnss_err_tau_s) and self.gnss_err_tau_s > 0.0
+        ):
+            raise ValueError("gnss_err_tau_s must be a positive finite number or None")
+        if self.cov_discretisation not in ("second_order", "van_loan"):
+            raise ValueError(
+                f"cov_discretisation must be 'second_order' or 'van_loan', "
+                f"got {self.cov_discretisation!r}"
+            )
+        if self.history_s < 2.0 * self.cov_interval_s:
+            raise ValueError("history_s must be at least twice cov_interval_s")
+
+    @classmethod
+    def for_grade(cls, grade: str, **overrides: object) -> BlendConfig:
+        """Noise densities of an IMU grade: ``"tactical"`` (1-10 deg/h gyros, S1) or ``"mems"``.
+
+        ``overrides`` replace any other field.
+        """
+        grades: dict[str, dict[str, object]] = {
+            # S1: tactical gyro drift 1-10 deg/h, accelerometer bias 0.1-1 mG
+            "tactical": dict(
+                accel_vrw_mps_rts=0.03 / 60.0,
+                gyro_arw_rad_rts=0.05 * _DEG / 60.0,
+                accel_bias_sigma_mps2=0.3e-3 * 9.80665,
+                gyro_bias_sigma_radps=3.0 * _DEG / _HOUR_S,
+            ),
+            # a typical autopilot MEMS IMU after factory calibration
+            "mems": dict(
+                accel_vrw_mps_rts=150e-6 * 9.80665,
+                gyro_arw_rad_rts=0.005 * _DEG,
+                accel_bias_sigma_mps2=10e-3 * 9.80665,
+                gyro_bias_sigma_radps=0.1 * _DEG,
+            ),
+        }
+        if grade not in grades:
+            raise ValueError(f"grade must be one of {sorted(grades)}, got {grade!r}")
+        params: dict[str, object] = dict(grades[grade])
+        params.update(overrides)
+        return cls(**params)  # type: ignore[arg-type]
+
+
+@dataclass(slots=True)
+class _Snapshot:
+    """Nominal state and covariance at a segment boundary, with the segment that follows."""
+
+    t_s: float
+    pos: FloatArray
+    vel: FloatArray
+    q_nb: ins.Quat
+    p_mat: FloatArray
+    phi: FloatArray | None = None
+    qd: FloatArray | None = None
+
+
+@dataclass(slots=True)
+class BlendDiagnostics:
+    """What the last GNSS update saw and the adaptive estimates now in use."""
+
+    r_scale: FloatArray = field(default_factory=lambda: np.ones(6))
+    """Adaptive scale on the reported variance per component (pos N, E, D, vel N, E, D);
+    the velocity components stay at 1 (see the module docstring)."""
+    r_used: FloatArray = field(default_factory=lambda: np.full(6, np.nan))
+    """Measurement variances used at the last update, (6,), NaN for absent components."""
+    accel_psd_ned: FloatArray = field(default_factory=lambda: np.zeros(3))
+    """Accelerometer white-noise PSD in use per NED axis, m^2/s^3."""
+    last_nis: float = math.nan
+    last_dof: int = 0
+    fused: int = 0
+    gated: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+
+
+class BlendNavigator:
+    """Adaptive GNSS/INS blend (implements :class:`companion.nav.navigator.Navigator`).
+
+    ``frame`` is the engine's local frame, used for the gravity model; it is
+    updated by :meth:`shift_frame`. Positions are of the IMU reference point.
+    """
+
+    def __init__(self, config: BlendConfig | None = None, frame: LocalFrame | None = None) -> None:
+        self.config = config or BlendConfig()
+        self._frame = frame or LocalFrame(45.0 * _DEG, 0.0, 0.0)
+        if frame is None:
+            log.warning("no local frame given: gravity evaluated at 45 deg latitude, 0 m")
+        self._strapdown = self.config.mode == "strapdown"
+        self._lever = np.array(self.config.lever_arm_b_m, dtype=float)
+        self._has_lever = bool(np.any(self._lever != 0.0))
+        self._gates = {m: chi2_gate(self.config.gate_false_alarm_prob, m) for m in range(1, 7)}
+        self._accel_psd0 = self.config.accel_vrw_mps_rts**2
+        cfg = self.config
+        h_fl, v_fl = cfg.pos_std_floor_m
+        self._pos_floor_t = (h_fl**2, h_fl**2, v_fl**2)
+        self._pos_floor = np.array(self._pos_floor_t)
+        self._h_cache: dict[tuple[bool, ...], tuple[FloatArray, FloatArray]] = {}
+        self._gm = cfg.gnss_error_model == "gauss_markov"
+        self._f_template = np.zeros((N_STATE, N_STATE))
+        self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
+            np.zeros(3),
+            np.zeros((3, 3)),
+            strapdown=self._strapdown,
+            tau_att_s=cfg.att_err_tau_s,
+            tau_ba_s=cfg.accel_bias_tau_s,
+            tau_bg_s=cfg.gyro_bias_tau_s,
+        )
+        self.reset()
+
+    # ------------------------------------------------------------------ protocol
+
+    @property
+    def initialised(self) -> bool:
+        """True once a state exists (after the first accepted fix with an attitude)."""
+        return self._init
+
+    def reset(self) -> None:
+        """Forget everything (the configuration and frame are kept)."""
+        self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
+        self._init = False
+        self._pre_imu: deque[tuple[float, tuple[float, float, float], tuple[float, float, float]]]
+        self._pre_imu = deque()
+        self._p = np.zeros((N_STATE, N_STATE))
+        self._gb = np.zeros(3)
+        self._gb_var = np.zeros(3)
+        self._gb_fix: FixType | None = None
+        self._gb_tau = 300.0
+        self._hist: deque[_Snapshot] = deque()
+        self._att_q: ins.Quat | None = None
+        self._att_t_s = math.nan
+        self._att_corr: ins.Quat = (1.0, 0.0, 0.0, 0.0)
+        self._last_fuse_t_s = math.nan
+        self._r_win = InnovationWindow(3, self.config.adaptive_window)
+        self._q_win = InnovationWindow(3, self.config.adaptive_window)
+        self.diag = BlendDiagnostics(accel_psd_ned=np.full(3, self._accel_psd0))
+        self._gqg = self._make_gqg()
+
+    def on_imu(self, sample: ImuSample) -> None:
+        """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
+        acc = sample.acc_b_mps2.tolist()
+        gyro = sample.gyro_b_radps.tolist()
+        if len(acc) != 3 or len(gyro) != 3:
+            self._reject("imu_bad_shape")
+            return
+        if not math.isfinite(sum(acc) + sum(gyro)):  # any NaN or inf makes the sum non-finite
+            self._reject("imu_not_finite")
+            return
+        acc_t = (acc[0], acc[1], acc[2])
+        gyro_t = (gyro[0], gyro[1], gyro[2])
+        mech = self._mech
+        if not self._init:
+            if self._pre_imu and sample.t_s <= self._pre_imu[-1][0]:
+                if sample.t_s > self._pre_imu[-1][0] - self.config.max_imu_gap_s:
+                    self._reject("imu_time_not_increasing")
+                    return
+                self._reject("imu_clock_restarted")  # a new clock: start the buffer again
+                self._pre_imu.clear()
+            self._pre_imu.append((sample.t_s, acc_t, gyro_t))
+            while self._pre_imu[0][0] < sample.t_s - self.config.history_s:
+                self._pre_imu.popleft()
+            mech.set_raw(acc_t, gyro_t)
+            mech.t_s = sample.t_s
+            return
+        dt = sample.t_s - mech.t_s
+        if dt <= 0.0:
+            self._reject("imu_time_not_increasing")
+            return
+        if dt > self.config.max_imu_gap_s:
+            self._reject("imu_gap")
+        mech.step(sample.t_s, acc_t, gyro_t)
+        if mech.seg_dt_s >= self.config.cov_interval_s:
+            self._close_segment()
+
+    def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
+        """Take the autopilot's attitude (yaw less ``yaw_correction_rad``).
+
+        Attitude-aided mode: it replaces the attitude (after the filter's own
+        estimated correction), carried by the gyro to the newest IMU time.
+        Strapdown mode: used only to initialise.
+        """
+        vals = (sample.roll_rad, sample.pitch_rad, sample.yaw_rad, yaw_correction_rad)
+        if not all(math.isfinite(v) for v in vals):
+            self._reject("attitude_not_finite")
+            return
+        q = euler_to_quat(sample.roll_rad, sample.pitch_rad, sample.yaw_rad - yaw_correction_rad)
+        self._att_q = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        self._att_t_s = sample.t_s
+        if self._init and not self._strapdown:
+            mech = self._mech
+            q_used = ins.quat_mul(self._att_corr, self._att_q)
+            mech.q_nb = mech.carry_attitude(q_used, mech.t_s - sample.t_s)
+
+    def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
+        """Gate and fuse one fix at its own time; carry the correction to the newest IMU time."""
+        cfg = self.config
+        if not (np.all(np.isfinite(meas.pos_ned_m)) and math.isfinite(meas.t_s)):
+            return self._refuse(meas, "position_not_finite")
+        r_pos_rep, r_vel_rep = self._reported_variances(meas)
+        if not self._init:
+            return self._initialise(meas, r_pos_rep, r_vel_rep)
+        mech = self._mech
+        if meas.t_s > mech.t_s + cfg.cov_interval_s:
+            return self._refuse(meas, "fix_ahead_of_imu")
+        if self._hist and meas.t_s < self._hist[0].t_s - cfg.cov_interval_s:
+            return self._refuse(meas, "fix_older_than_history")
+        if math.isfinite(self._last_fuse_t_s) and meas.t_s <= self._last_fuse_t_s - 1e-9:
+            return self._refuse(meas, "fix_out_of_order")
+
+        scale = self._r_scale()
+        self._gnss_error_block(meas.fix_type, r_pos_rep * scale[:3])
+        idx, pos_m, vel_m, q_m = self._state_at(meas.t_s)
+        p_m = self._hist[idx].p_mat
+        mat_nb = ins.quat_to_mat(q_m)
+        rows, y, h_mat, r_rep = self._measurement(meas, pos_m, vel_m, mat_nb, r_pos_rep, r_vel_rep)
+        if self._gm:  # the white part of the position noise; the rest is in states 15:18
+            r_rep[:3] = self._white_part(r_pos_rep)
+        r_diag = r_rep * scale[rows]
+        r_mat = np.diag(r_diag)
+        dof = len(rows)
+        threshold = self._gates[dof]
+        try:
+            corr = joseph_update(p_m, y, h_mat, r_mat)
+        except ValueError:
+            return self._refuse(meas, "innovation_cov_not_pd")
+        innov_pos = -y[:3]
+        s_pos = corr.innov_cov[:3, :3]
+        self.diag.last_nis = corr.nis
+        self.diag.last_dof = dof
+        if gate and corr.nis > threshold:
+            self.diag.gated += 1
+            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, corr.nis, threshold)
+            return GnssUpdate(meas.t_s, False, corr.nis, dof, threshold, innov_pos, s_pos, "gate")
+
+        if cfg.adaptive:
+            self._adapt(y, h_mat, r_rep, p_m, corr, meas.t_s)
+        self.diag.r_used = np.full(6, np.nan)
+        self.diag.r_used[rows] = r_diag
+        self.diag.r_used[:3] = r_pos_rep * scale[:3]
+        self._apply(idx, corr.dx, corr.p_post)
+        self._last_fuse_t_s = meas.t_s
+        self.diag.fused += 1
+        return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
+
+    def predict(self, t_s: float) -> NavState | None:
+        """The state carried from the newest IMU time to ``t_s`` (constant velocity), unchanged."""
+        if not self._init:
+            return None
+        mech = self._mech
+        pos, vel = mech.state_vectors()
+        dt = max(0.0, t_s - mech.t_s)
+        # covariance at the newest IMU time: the last propagated P plus the open segment
+        dt_p = max(0.0, t_s - self._hist[-1].t_s)
+        p = self._p
+        q_acc = np.diag(self.diag.accel_psd_ned)
+        p_pos = (
+            p[0:3, 0:3]
+            + dt_p * (p[0:3, 3:6] + p[3:6, 0:3])
+            + dt_p**2 * p[3:6, 3:6]
+            + q_acc * dt_p**3 / 3.0
+        )
+        p_vel = p[3:6, 3:6] + q_acc * dt_p
+        _, _, yaw = quat_to_euler(np.array(mech.q_nb))
+        return NavState(t_s, pos + vel * dt, vel, 0.5 * (p_pos + p_pos.T), p_vel, yaw)
+
+    def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
+        """Re-express the state in ``new`` (position through geodetic, vectors rotated)."""
+        self._frame = new
+        self._mech.set_gravity(ins.LocalGravity(new.lat0_rad, new.alt0_m))
+        if not self._init:
+            return
+        if self._mech.seg_dt_s > 0.0:
+            self._close_segment()
+        rot = rotation_between_frames(old, new)
+        mech = self._mech
+        lat, lon, alt = old.ned_to_lla(np.array(mech.pos))
+        mech.pos = [float(c) for c in new.lla_to_ned(lat, lon, alt)]
+        mech.vel = [float(c) for c in rot @ np.array(mech.vel)]
+        q_rot = _mat_to_quat(rot)
+        mech.q_nb = ins.quat_normalise(ins.quat_mul(q_rot, mech.q_nb))
+        t = np.eye(N_STATE)
+        self._gb = rot @ self._gb
+        for k in (ins.IP, ins.IV, ins.IA, IGB):
+            t[k : k + 3, k : k + 3] = rot
+        self._p = t @ self._p @ t.T
+        self._att_corr = ins.quat_normalise(ins.quat_mul(q_rot, self._att_corr))
+        pos, vel = mech.state_vectors()
+        self._hist = deque([_Snapshot(mech.t_s, pos, vel, mech.q_nb, self._p)])
+        self._last_fuse_t_s = math.nan
+
+    # ------------------------------------------------------------------ diagnostics
+
+    @property
+    def r_estimate(self) -> FloatArray:
+        """Measurement variances of the last update (pos N, E, D, vel N, E, D), (6,)."""
+        return self.diag.r_used.copy()
+
+    @property
+    def q_estimate_accel_psd(self) -> FloatArray:
+        """Accelerometer white-noise PSD in use per NED axis, m^2/s^3, (3,)."""
+        return self.diag.accel_psd_ned.copy()
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Error-state covariance at the last covariance epoch, (15, 15)."""
+        return self._p.copy()
+
+    @property
+    def biases(self) -> tuple[FloatArray, FloatArray]:
+        """Accelerometer (m/s^2) and gyro (rad/s) bias estimates, body axes, (3,) each."""
+        return np.array(self._mech.ba), np.array(self._mech.bg)
+
+    @property
+    def attitude_q_nb(self) -> FloatArray:
+        """Body-to-NED quaternion (w, x, y, z) in use, (4,)."""
+        return np.array(self._mech.q_nb)
+
+    @property
+    def imu_t_s(self) -> float:
+        """Time of the newest IMU sample integrated, s."""
+        return self._mech.t_s
+
+    # ------------------------------------------------------------------ internals
+
+    def _reject(self, reason: str) -> None:
+        rej = self.diag.rejected
+        rej[reason] = rej.get(reason, 0) + 1
+        if rej[reason] in (1, 10, 100, 1000) or rej[reason] % 10000 == 0:
+            log.warning("blend rejected input (%s), %d so far", reason, rej[reason])
+
+    def _refuse(self, meas: GnssMeasurement, reason: str) -> GnssUpdate:
+        self._reject(reason)
+        nan3 = np.full(3, np.nan)
+        return GnssUpdate(
+            meas.t_s, False, math.nan, 0, math.nan, nan3, np.full((3, 3), np.nan), reason
+        )
+
+    def _make_gqg(self) -> FloatArray:
+        """Diagonal (15,) of the continuous noise intensity G Qc G^T with the current accel PSD."""
+        cfg = self.config
+        g = np.zeros(N_STATE)
+        g[3:6] = self.diag.accel_psd_ned
+        if self._strapdown:
+            g[6:9] = cfg.gyro_arw_rad_rts**2
+        else:
+            sig = np.array(cfg.att_err_sigma_rad)
+            g[6:9] = 2.0 * sig**2 / cfg.att_err_tau_s
+        g[9:12] = _gm_psd(cfg.accel_bias_sigma_mps2, cfg.accel_bias_tau_s)
+        g[12:15] = _gm_psd(cfg.gyro_bias_sigma_radps, cfg.gyro_bias_tau_s)
+        if self._gm and self._gb_fix is not None:
+            g[IGB : IGB + 3] = 2.0 * self._gb_var / self._gb_tau
+        return g
+
+    def _f_mat(self, f_ned: FloatArray, mat_nb: FloatArray) -> FloatArray:
+        """F (15, 15) of :func:`companion.nav.ins.error_model_f`, filled into a template."""
+        f = self._f_template.copy()
+        f[3, 7] = -f_ned[2]
+        f[3, 8] = f_ned[1]
+        f[4, 6] = f_ned[2]
+        f[4, 8] = -f_ned[0]
+        f[5, 6] = -f_ned[1]
+        f[5, 7] = f_ned[0]
+        f[3:6, 9:12] = -mat_nb
+        if self._strapdown:
+            f[6:9, 12:15] = mat_nb
+        return f
+
+    def _discretise(self, f_mat: FloatArray, dt_s: float) -> tuple[FloatArray, FloatArray]:
+        if self.config.cov_discretisation == "van_loan":
+            return van_loan(f_mat, np.diag(self._gqg), dt_s)
+        return discretise_second_order(f_mat, self._gqg, dt_s)
+
+    def _close_segment(self) -> None:
+        """Propagate P over the accumulated segment and push a snapshot."""
+        mech = self._mech
+        dt, f_ned = mech.take_segment()
+        snap = self._hist[-1]
+        mat_nb = ins.quat_to_mat(mech.q_nb)
+        phi, qd = self._discretise(self._f_mat(f_ned, mat_nb), dt)
+        snap.phi, snap.qd = phi, qd
+        self._p = predict_covariance(self._p, phi, qd)
+        pos, vel = mech.state_vectors()
+        self._hist.append(_Snapshot(mech.t_s, pos, vel, mech.q_nb, self._p))
+        horizon = mech.t_s - self.config.history_s
+        while len(self._hist) > 2 and self._hist[1].t_s <= horizon:
+            self._hist.popleft()
+
+    def _state_at(self, t_s: float) -> tuple[int, FloatArray, FloatArray, ins.Quat]:
+        """Nominal position, velocity and attitude interpolated at ``t_s``, and the index of
+        the snapshot nearest in time (whose covariance the fix is fused with)."""
+        hist = self._hist
+        mech = self._mech
+        n = len(hist)
+        j = n - 1
+        while j > 0 and hist[j].t_s > t_s:
+            j -= 1
+        s0 = hist[j]
+        if j + 1 < n:
+            s1 = hist[j + 1]
+            s1_t, s1_pos, s1_vel, s1_q = s1.t_s, s1.pos, s1.vel, s1.q_nb
+        else:
+            s1_t = mech.t_s
+            s1_pos, s1_vel = mech.state_vectors()
+            s1_q = mech.q_nb
+        h = s1_t - s0.t_s
+        u = min(max((t_s - s0.t_s) / h, 0.0), 1.0) if h > 1e-9 else 1.0
+        # cubic Hermite position from the end velocities; velocity linear
+        h00 = 2 * u**3 - 3 * u**2 + 1
+        h10 = u**3 - 2 * u**2 + u
+        h01 = -2 * u**3 + 3 * u**2
+        h11 = u**3 - u**2
+        pos = h00 * s0.pos + h10 * h * s0.vel + h01 * s1_pos + h11 * h * s1_vel
+        vel = (1.0 - u) * s0.vel + u * s1_vel
+        if u >= 0.5 and j + 1 < n:
+            return j + 1, pos, vel, s1_q
+        return j, pos, vel, (s0.q_nb if u < 0.5 else s1_q)
+
+    def _white_part(self, r_pos: FloatArray) -> FloatArray:
+        """White share of the reported position variance (floored), (3,)."""
+        return np.maximum(self.config.gnss_white_fraction * r_pos, self._pos_floor)
+
+    def _gnss_error_block(self, fix_type: FixType, var: FloatArray) -> None:
+        """Keep the receiver-error states in step with the fix: variance ``var`` (3,) and the
+        fix type's correlation time; re-initialise them when the fix type changes or the
+        variance jumps by more than 4x (a new error regime, uncorrelated with the old)."""
+        if not self._gm:
+            return
+        old = self._gb_var.tolist()
+        new = var.tolist()
+        jump = self._gb_fix is not None and any(
+            v > 4.0 * o or v < 0.25 * o for v, o in zip(new, old, strict=True)
+        )
+        if fix_type != self._gb_fix or jump:
+            tau = self.config.gnss_err_tau_s or GNSS_ERR_TAU_S.get(fix_type, 300.0)
+            self._gb_fix = fix_type
+            self._gb_tau = tau
+            self._gb = np.zeros(3)
+            self._f_template[IGB : IGB + 3, IGB : IGB + 3] = -np.eye(3) / tau
+            for p in [self._p] + [snap.p_mat for snap in self._hist]:
+                p[IGB : IGB + 3, :] = 0.0
+                p[:, IGB : IGB + 3] = 0.0
+                p[IGB : IGB + 3, IGB : IGB + 3] = np.diag(var)
+            self._gb_var = var.copy()
+            self._gqg = self._make_gqg()
+        elif any(abs(v - o) > 0.05 * o for v, o in zip(new, old, strict=True)):
+            self._gb_var = var.copy()
+            self._gqg = self._make_gqg()
+
+    def _reported_variances(self, meas: GnssMeasurement) -> tuple[FloatArray, FloatArray]:
+        """Position and velocity variances (3,) each: reported, else fallback, then floored."""
+        cfg = self.config
+        h_std, v_std = FALLBACK_STD_M.get(meas.fix_type, (10.0, 15.0))
+        fallback = (h_std**2, h_std**2, v_std**2)
+        floor = self._pos_floor_t
+        r_pos = [
+            max(r if (math.isfinite(r) and r > 0.0) else fb, fl)
+            for r, fb, fl in zip(meas.pos_var_ned_m2.tolist(), fallback, floor, strict=True)
+        ]
+        vel_fb = cfg.vel_std_fallback_mps**2
+        vel_fl = cfg.vel_std_floor_mps**2
+        r_vel = [
+            max(r if (math.isfinite(r) and r > 0.0) else vel_fb, vel_fl)
+            for r in meas.vel_var_ned_m2ps2.tolist()
+        ]
+        return np.array(r_pos), np.array(r_vel)
+
+    def _measurement(
+        self,
+        meas: GnssMeasurement,
+        pos: FloatArray,
+        vel: FloatArray,
+        mat_nb: FloatArray,
+        r_pos: FloatArray,
+        r_vel: FloatArray,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Rows used, y = h(x_hat) - z (m,), H (m, 18) (read-only), reported R diagonal (m,)."""
+        vel_z = np.asarray(meas.vel_ned_mps, dtype=float)
+        vel_ok = np.isfinite(vel_z)
+        key = tuple(vel_ok.tolist())
+        cached = self._h_cache.get(key)
+        if cached is None:
+            rows_c = np.concatenate([np.arange(3), 3 + np.flatnonzero(vel_ok)])
+            h_c = np.zeros((len(rows_c), N_STATE))
+            h_c[0:3, ins.IP : ins.IP + 3] = np.eye(3)
+            if self._gm:
+                h_c[0:3, IGB : IGB + 3] = np.eye(3)
+            for k, axis in enumerate(np.flatnonzero(vel_ok)):
+                h_c[3 + k, ins.IV + axis] = 1.0
+            h_c.flags.writeable = False  # shared between fixes
+            cached = (rows_c, h_c)
+            self._h_cache[key] = cached
+        rows, h_mat = cached
+        m = len(rows)
+        pos_ant = pos
+        vel_ant = vel
+        if self._has_lever:
+            lever_n = mat_nb @ self._lever
+            pos_ant = pos + lever_n
+            h_mat = h_mat.copy()
+            h_mat[0:3, ins.IA : ins.IA + 3] = skew(lever_n)
+            omega = np.array(self._mech.last_gyro_b_radps) - np.array(self._mech.bg)
+            vel_ant = vel + mat_nb @ np.cross(omega, self._lever)
+        y = np.empty(m)
+        y[0:3] = pos_ant + self._gb - meas.pos_ned_m
+        r_rep = np.empty(m)
+        r_rep[0:3] = r_pos
+        axes = rows[3:] - 3
+        y[3:] = vel_ant[axes] - vel_z[axes]
+        r_rep[3:] = r_vel[axes]
+        return rows, y, h_mat, r_rep
+
+    def _r_scale(self) -> FloatArray:
+        """Adaptive variance scale per component (ones when not adaptive or not ready)."""
+        cfg = self.config
+        scale = np.ones(6)
+        if not cfg.adaptive:
+            return scale
+        lo, hi = cfg.r_scale_bounds
+        for i in range(3):
+            if self._r_win.count(i) >= cfg.adaptive_min_epochs:
+                scale[i] = min(max(self._r_win.mean(i), lo), hi)
+        self.diag.r_scale = scale
+        return scale
+
+    def _adapt(
+        self,
+        y: FloatArray,
+        h_mat: FloatArray,
+        r_rep: FloatArray,
+        p_prior: FloatArray,
+        corr: Correction,
+        t_s: float,
+    ) -> None:
+        """Window the residual-form R statistics and the Q correction K (eta eta^T - S) K^T.
+
+        For the optimal gain K S K^T = P- - P+, so the velocity diagonal of the Q
+        correction is dx_v^2 - (P- - P+)_vv (dx = K eta): no extra matrix products.
+        """
+        cfg = self.config
+        dx, p_post = corr.dx, corr.p_post
+        resid = y[:3] - h_mat[:3] @ dx
+        if self._has_lever or self._gm:
+            h3 = h_mat[:3]
+            hph = np.sum((h3 @ p_post) * h3, axis=1)
+        else:
+            hph = p_post.diagonal()[:3]
+        for k in range(3):  # position rows come first
+            self._r_win.add(k, (float(resid[k]) ** 2 + float(hph[k])) / float(r_rep[k]))
+        # Q: velocity block of K (eta eta^T - S) K^T per unit time, added to the PSD in use
+        if not (math.isfinite(self._last_fuse_t_s) and t_s > self._last_fuse_t_s):
+            return
+        dt = t_s - self._last_fuse_t_s
+        dp = (p_prior.diagonal() - p_post.diagonal())[3:6].tolist()
+        dxv = dx[3:6].tolist()
+        psd = self.diag.accel_psd_ned
+        lo, hi = cfg.q_scale_bounds
+        q0 = self._accel_psd0
+        new = psd.copy()
+        for i in range(3):
+            self._q_win.add(i, float(psd[i]) + (dxv[i] ** 2 - dp[i]) / dt)
+            if self._q_win.count(i) >= cfg.adaptive_min_epochs:
+                new[i] = min(max(self._q_win.mean(i), lo * q0), hi * q0)
+        if np.any(np.abs(new - psd) > 1e-3 * psd):
+            self.diag.accel_psd_ned = new
+            self._gqg = self._make_gqg()
+
+    def _apply(self, idx: int, dx: FloatArray, p_post: FloatArray) -> None:
+        """Carry a correction made at snapshot ``idx`` to the newest IMU time through the
+        buffered transitions, correcting the snapshots on the way and the nominal state."""
+        hist = self._hist
+        mech = self._mech
+        hist[idx].p_mat = p_post
+        _inject_snapshot(hist[idx], dx)
+        p = p_post
+        for i in range(idx, len(hist) - 1):
+            s = hist[i]
+            if s.phi is None or s.qd is None:
+                raise ValueError("history segment without a transition")
+            dx = s.phi @ dx
+            p = predict_covariance(p, s.phi, s.qd)
+            hist[i + 1].p_mat = p
+            _inject_snapshot(hist[i + 1], dx)
+        self._p = p
+        # the open segment (shorter than cov_interval_s): first-order carry
+        dt_open = mech.seg_dt_s
+        if dt_open > 0.0:
+            f_ned = np.array(mech.seg_fn_sum) / dt_open
+            dx = dx + dt_open * (self._f_mat(f_ned, ins.quat_to_mat(mech.q_nb)) @ dx)
+        mech.inject(dx)
+        self._inject_attitude_corr(dx)
+        if self._gm:
+            self._gb = self._gb - dx[IGB : IGB + 3]
+
+    def _inject_attitude_corr(self, dx: FloatArray) -> None:
+        if not self._strapdown:
+            self._att_corr = ins.rotate_by_psi(self._att_corr, dx[ins.IA : ins.IA + 3])
+
+    def _initialise(
+        self, meas: GnssMeasurement, r_pos: FloatArray, r_vel: FloatArray
+    ) -> GnssUpdate:
+        """Start from the first fix and the latest attitude, at the newest IMU time."""
+        cfg = self.config
+        if self._att_q is None:
+            return self._refuse(meas, "no_attitude_yet")
+        pre = self._pre_imu
+        if not pre:
+            return self._refuse(meas, "no_imu_yet")
+        if meas.t_s < pre[0][0]:
+            return self._refuse(meas, "fix_older_than_history")
+        mech = self._mech
+        # start at the fix time from the IMU reading just before it, then replay the
+        # buffered IMU samples up to the newest
+        t0 = min(meas.t_s, pre[-1][0])
+        before = [x for x in pre if x[0] <= t0]
+        mech.set_raw(before[-1][1], before[-1][2])
+        q0 = mech.carry_attitude(self._att_q, t0 - self._att_t_s)
+        mat_nb = ins.quat_to_mat(q0)
+        vel = np.asarray(meas.vel_ned_mps, dtype=float)
+        vel_ok = np.isfinite(vel)
+        vel0 = np.where(vel_ok, vel, 0.0)
+        var_v = np.where(vel_ok, r_vel, cfg.init_vel_sigma_mps**2)
+        pos0 = meas.pos_ned_m - mat_nb @ self._lever + vel0 * (t0 - meas.t_s)
+        mech.initialise(t0, pos0, vel0, q0)
+        p = np.zeros((N_STATE, N_STATE))
+        p[0:3, 0:3] = np.diag(r_pos)
+        self._gb_fix = None
+        if self._gm:
+            # the first fix carries the receiver error b: position error = b + w,
+            # receiver-error state error = -b (the estimate starts at 0)
+            self._p = p
+            self._hist.clear()
+            self._gnss_error_block(meas.fix_type, r_pos)
+            var = self._gb_var
+            p[0:3, 0:3] = np.diag(var + self._white_part(r_pos))
+            p[0:3, IGB : IGB + 3] = -np.diag(var)
+            p[IGB : IGB + 3, 0:3] = -np.diag(var)
+        p[3:6, 3:6] = np.diag(var_v)
+        att_sig = np.array(cfg.init_att_sigma_rad if self._strapdown else cfg.att_err_sigma_rad)
+        p[6:9, 6:9] = np.diag(att_sig**2)
+        p[9:12, 9:12] = np.eye(3) * cfg.accel_bias_sigma_mps2**2
+        p[12:15, 12:15] = np.eye(3) * cfg.gyro_bias_sigma_radps**2
+        self._p = p
+        self._att_corr = (1.0, 0.0, 0.0, 0.0)
+        pos, vel_v = mech.state_vectors()
+        self._hist.clear()
+        self._hist.append(_Snapshot(t0, pos, vel_v, mech.q_nb, p))
+        self._init = True
+        self._last_fuse_t_s = meas.t_s
+        for t_s, acc, gyro in pre:
+            if t_s > t0:
+                mech.step(t_s, acc, gyro)
+                if mech.seg_dt_s >= cfg.cov_interval_s:
+                    self._close_segment()
+        pre.clear()
+        log.info("blend initialised at t=%.3f s (%s)", meas.t_s, cfg.mode)
+        gate3 = self._gates[3]
+        return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")
+
+
+def _gm_psd(sigma: float, tau_s: float) -> float:
+    """White-noise PSD driving a first-order Gauss-Markov process of steady-state ``sigma``.
+
+    For ``tau_s = inf`` the bias is a random walk reaching ``sigma`` in one hour.
+    """
+    if math.isfinite(tau_s):
+        return 2.0 * sigma**2 / tau_s
+    return sigma**2 / _HOUR_S
+
+
+def _inject_snapshot(snap: _Snapshot, dx: FloatArray) -> None:
+    snap.pos = snap.pos - dx[ins.IP : ins.IP + 3]
+    snap.vel = snap.vel - dx[ins.IV : ins.IV + 3]
+    snap.q_nb = ins.rotate_by_psi(snap.q_nb, dx[ins.IA : ins.IA + 3])
+
+
+def _mat_to_quat(mat: FloatArray) -> ins.Quat:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method, w >= 0 branch)."""
+    tr = float(np.trace(mat))
+    if tr > 0.0:
+        s = math.sqrt(tr + 1.0) * 2.0
+        return ins.quat_normalise(
+            (
+                0.25 * s,
+                (mat[2, 1] - mat[1, 2]) / s,
+                (mat[0, 2] - mat[2, 0]) / s,
+                (mat[1, 0] - mat[0, 1]) / s,
+            )
+        )
+    i = int(np.argmax(np.diag(mat)))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = math.sqrt(1.0 + mat[i, i] - mat[j, j] - mat[k, k]) * 2.0
+    q = [0.0, 0.0, 0.0, 0.0]
+    q[0] = (mat[k, j] - mat[j, k]) / s
+    q[1 + i] = 0.25 * s
+    q[1 + j] = (mat[j, i] + mat[i, j]) / s
+    q[1 + k] = (mat[k, i] + mat[i, k]) / s
+    return ins.quat_normalise((q[0], q[1], q[2], q[3]))
