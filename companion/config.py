@@ -24,8 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from companion.engine import EngineConfig
+from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
+from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
 
@@ -105,6 +107,10 @@ class Config:
     engine: EngineConfig = field(default_factory=EngineConfig)
     outage: OutageConfig = field(default_factory=OutageConfig)
     heading: HeadingConfig = field(default_factory=HeadingConfig)
+    blend: BlendConfig = field(default_factory=lambda: BlendConfig.for_grade("mems"))
+    """The GNSS/INS blend; its noise defaults are a typical autopilot MEMS IMU's (for a
+    tactical-grade IMU, see sitl_fixtures/tactical.toml)."""
+    integrity: IntegrityConfig = field(default_factory=IntegrityConfig)
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
 
@@ -128,27 +134,35 @@ def load_config(path: Path | None) -> Config:
 def config_from_dict(data: dict[str, Any]) -> Config:
     """Build a Config from parsed TOML. Raises ConfigError naming the key."""
     blocks: dict[str, Any] = {}
-    block_types = {f.name: f.type for f in dataclasses.fields(Config)}
-    hints = typing.get_type_hints(Config)
+    defaults = Config()
+    known_blocks = [f.name for f in dataclasses.fields(Config)]
     for block, table in data.items():
-        if block not in block_types:
-            raise ConfigError(f"unknown block [{block}] (known: {', '.join(block_types)})")
+        if block not in known_blocks:
+            raise ConfigError(f"unknown block [{block}] (known: {', '.join(known_blocks)})")
         if not isinstance(table, dict):
             raise ConfigError(f"[{block}] must be a table")
-        blocks[block] = _build_block(block, hints[block], table)
+        blocks[block] = _build_block(block, getattr(defaults, block), table)
     return Config(**blocks)
 
 
-def _build_block(block: str, cls: type, table: dict[str, Any]) -> Any:
+def _build_block(block: str, default: Any, table: dict[str, Any]) -> Any:
+    """The block's default with the keys of ``table`` replaced (validated)."""
+    cls = type(default)
     hints = typing.get_type_hints(cls)
     known = {f.name for f in dataclasses.fields(cls)}
     kwargs: dict[str, Any] = {}
     for key, value in table.items():
         if key not in known:
             raise ConfigError(f"[{block}] unknown key '{key}' (known: {', '.join(sorted(known))})")
-        kwargs[key] = _coerce(block, key, hints[key], value)
+        current = getattr(default, key)
+        if dataclasses.is_dataclass(current):  # a nested block: a TOML sub-table
+            if not isinstance(value, dict):
+                raise ConfigError(f"[{block}.{key}] must be a table")
+            kwargs[key] = _build_block(f"{block}.{key}", current, value)
+        else:
+            kwargs[key] = _coerce(block, key, hints[key], value)
     try:
-        return cls(**kwargs)
+        return dataclasses.replace(default, **kwargs)
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"[{block}] {exc}") from None
 
@@ -205,24 +219,34 @@ def _coerce(block: str, key: str, hint: Any, value: Any) -> Any:
 def template() -> str:
     """Every block and key with its default and documentation, as TOML."""
     lines = ["# companion configuration: every key, with its default.", ""]
+    defaults = Config()
     for block in dataclasses.fields(Config):
-        cls = typing.get_type_hints(Config)[block.name]
-        docs = _attribute_docs(cls)
-        lines.append(f"[{block.name}]")
-        summary = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
-        if summary:
-            lines.insert(len(lines) - 1, f"# {summary}")
-        default = cls()
-        for f in dataclasses.fields(cls):
-            for doc_line in docs.get(f.name, "").splitlines():
-                lines.append(f"# {doc_line.strip()}")
-            value = getattr(default, f.name)
-            if value is None:  # TOML has no null: an unset optional key stays commented
-                lines.append(f"# {f.name} = (unset)")
-            else:
-                lines.append(f"{f.name} = {_toml_value(value)}")
-        lines.append("")
+        lines += _template_block(block.name, getattr(defaults, block.name))
     return "\n".join(lines)
+
+
+def _template_block(name: str, default: Any) -> list[str]:
+    cls = type(default)
+    docs = _attribute_docs(cls)
+    summary = (cls.__doc__ or "").strip().splitlines()
+    lines = [f"# {summary[0]}"] if summary else []
+    lines.append(f"[{name}]")
+    nested: list[tuple[str, Any]] = []
+    for f in dataclasses.fields(cls):
+        value = getattr(default, f.name)
+        if dataclasses.is_dataclass(value):
+            nested.append((f.name, value))
+            continue
+        for doc_line in docs.get(f.name, "").splitlines():
+            lines.append(f"# {doc_line.strip()}")
+        if value is None:  # TOML has no null: an unset optional key stays commented
+            lines.append(f"# {f.name} = (unset)")
+        else:
+            lines.append(f"{f.name} = {_toml_value(value)}")
+    lines.append("")
+    for sub_name, sub_default in nested:
+        lines += _template_block(f"{name}.{sub_name}", sub_default)
+    return lines
 
 
 def _toml_value(value: Any) -> str:

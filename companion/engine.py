@@ -28,12 +28,15 @@ import logging
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
+from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame, wrap_2pi
 from companion.nav.heading import HeadingConfig, HeadingCorrector
+from companion.nav.motion import SingerConfig, SingerNavigator
 from companion.nav.navigator import GnssMeasurement, Navigator, NavState
 from companion.nav.outage import OutageConfig, OutageMonitor
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
@@ -86,8 +89,15 @@ class EngineConfig:
     """Rate of the CMP_* NAMED_VALUE_FLOAT status values."""
     reanchor_distance_m: float = 20_000.0
     """Re-anchor the local NED frame when the solution is this far from its anchor."""
-    navigator: str = "passthrough"
-    """Which navigator carries the position: 'passthrough' (GNSS + constant velocity)."""
+    navigator: str = "blend"
+    """Which navigator carries the position: 'blend' (GNSS/INS, S1; with the pass-through
+    taking over while no IMU stream arrives), 'singer' (S2's manoeuvre model, no IMU) or
+    'passthrough' (GNSS with constant-velocity extrapolation)."""
+    imu_timeout_s: float = 0.5
+    """The blend carries the solution only while an IMU sample is at most this old."""
+    primary_receiver: int = 0
+    """The receiver fused normally; the other is fused only while this one is unusable
+    (and is always the integrity monitor's independent solution)."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.publish_rate_hz <= 50.0:
@@ -98,11 +108,13 @@ class EngineConfig:
             raise ValueError("reanchor_distance_m must be >= 1000")
         if self.navigator not in NAVIGATORS:
             raise ValueError(f"navigator must be one of {sorted(NAVIGATORS)}")
+        if not 0.0 < self.imu_timeout_s <= 5.0:
+            raise ValueError("imu_timeout_s must be in (0, 5]")
+        if self.primary_receiver not in (0, 1):
+            raise ValueError("primary_receiver must be 0 (GPS_RAW_INT) or 1 (GPS2_RAW)")
 
 
-NAVIGATORS: dict[str, Callable[[], Navigator]] = {
-    "passthrough": lambda: PassthroughNavigator(PassthroughConfig()),
-}
+NAVIGATORS = ("blend", "singer", "passthrough")
 
 
 def gnss_measurement(fix: GnssFix, frame: LocalFrame) -> GnssMeasurement:
@@ -160,10 +172,14 @@ class Engine:
         config: EngineConfig | None = None,
         outage: OutageConfig | None = None,
         heading: HeadingConfig | None = None,
+        blend: BlendConfig | None = None,
+        integrity: IntegrityConfig | None = None,
     ) -> None:
         self.config = config or EngineConfig()
         self._outage_config = outage or OutageConfig()
         self._heading_config = heading or HeadingConfig()
+        self._blend_config = blend or BlendConfig.for_grade("mems")
+        self._integrity_config = integrity or IntegrityConfig()
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
@@ -180,8 +196,21 @@ class Engine:
         self._reset()
 
     def _reset(self) -> None:
-        self.navigator: Navigator = NAVIGATORS[self.config.navigator]()
+        kind = self.config.navigator
+        self.fallback: Navigator = PassthroughNavigator(PassthroughConfig())
+        self.primary: Navigator | None = None
+        if kind == "blend":
+            self.primary = BlendNavigator(self._blend_config)
+        elif kind == "singer":
+            self.fallback = SingerNavigator(SingerConfig())
+        self.navigator: Navigator = self.fallback
+        """The navigator carrying the solution now (the blend, or the fallback)."""
+        self._last_imu_t_s = -math.inf
         self.monitor = OutageMonitor(self._outage_config)
+        self.integrity = IntegrityMonitor(self._integrity_config)
+        self._landed: LandedState | None = None
+        self._airborne = False
+        self._rx_last_usable_t_s: dict[int, float] = {}
         self.frame: LocalFrame | None = None
         self.now_s: float | None = None
         self._publish_tick = -1
@@ -215,22 +244,30 @@ class Engine:
                 self.stats.alerts[out.code.value] += 1
                 if out.code in _HEADING_CODES:
                     self.state_changes += 1
+                if out.code is AlertCode.HDG_APPLIED:
+                    self._heading_applied()
         return outputs
 
     # ------------------------------------------------------------------ handlers
 
     def _on_imu(self, sample: ImuSample) -> list[Output]:
-        self.navigator.on_imu(sample)
+        if self.primary is not None:
+            self.primary.on_imu(sample)
+            self._last_imu_t_s = sample.t_s
         return []
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
         self.heading.on_attitude(sample)
-        self.navigator.on_attitude(sample, self.heading.correction_rad)
+        if self.primary is not None:
+            self.primary.on_attitude(sample, self.heading.correction_rad)
         return []
 
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
         state = sample.landed_state
+        self._landed = state
+        if state in (LandedState.IN_AIR, LandedState.LANDING):
+            self._airborne = True
         on_ground = None if state is LandedState.UNDEFINED else state is LandedState.ON_GROUND
         self.heading.on_landed_state(on_ground)
         return []
@@ -241,6 +278,15 @@ class Engine:
 
     def _on_heading_command(self, sample: HeadingCommand) -> list[Output]:
         return self.heading.on_command(sample)
+
+    def _heading_applied(self) -> None:
+        """The navigators restart their heading error from the applied correction."""
+        applied = self.heading.applied
+        if applied is None:
+            return
+        sigma_rad = max(applied.eps_rad / self._heading_config.z_score, 1e-6)
+        for nav in self._navigators():
+            nav.reset_heading(sigma_rad)
 
     # ------------------------------------------------------------------ persistence
 
@@ -284,7 +330,10 @@ class Engine:
         return []
 
     def _on_gnss(self, fix: GnssFix) -> list[Output]:
-        outputs: list[Output] = self.heading.on_gnss(fix)
+        # S4 corrects the heading during the taxi before take-off; once airborne the
+        # correction (applied or not) stands for the rest of the flight
+        outputs: list[Output] = [] if self._airborne else self.heading.on_gnss(fix)
+        self._select_navigator()
         pred = self._state_now(fix.t_s)
         nav_speed = float(np.hypot(*pred.vel_ned_mps[:2])) if pred is not None else None
         verdict = self.monitor.assess(fix, nav_speed)
@@ -293,23 +342,80 @@ class Engine:
             self.stats.gnss[verdict.reason] += 1
             return outputs
         if self.frame is None:
-            self.frame = LocalFrame(fix.lat_rad, fix.lon_rad, fix.alt_msl_m)
+            self._anchor(LocalFrame(fix.lat_rad, fix.lon_rad, fix.alt_msl_m))
+        if self.frame is None:  # _anchor sets it; keeps mypy honest
+            raise ValueError("no local frame after anchoring")
         meas = gnss_measurement(fix, self.frame)
+        if not self._fuse_receiver(fix):
+            # the other receiver: the integrity monitor's independent solution only
+            self.stats.gnss[f"rx{fix.receiver_id}_monitored"] += 1
+            outputs += self.integrity.on_fix(fix, meas, None)
+            return outputs
+        if self.integrity.exclude(fix.receiver_id):
+            self.stats.gnss["excluded"] += 1
+            outputs += self.integrity.on_fix(fix, meas, None)
+            return outputs
         if verdict.reinitialise:
-            self.navigator.reset()
-            self.navigator.on_gnss(meas, gate=False)
+            for nav in self._navigators():
+                nav.reset()
+                nav.on_gnss(meas, gate=False)
             self.monitor.reinitialised(fix.t_s)
             self.stats.gnss["reinitialised"] += 1
             self._last_fused_fix = fix
             return outputs
-        update = self.navigator.on_gnss(meas, gate=verdict.gate)
-        self.stats.gnss["fused" if update.fused else "gate_rejected"] += 1
+        update = self.fallback.on_gnss(meas, gate=verdict.gate)
+        if self.primary is not None:
+            primary_update = self.primary.on_gnss(
+                meas, gate=verdict.gate and self.primary.initialised
+            )
+            if self.navigator is self.primary:
+                update = primary_update
         if update.fused:
+            self.stats.gnss["fused"] += 1
             self._last_fused_fix = fix
             self._satellites = fix.satellites or 0
-        outputs += self.monitor.gate_result(fix.t_s, update.fused)
+        else:
+            self.stats.gnss["gate_rejected" if update.reason == "gate" else update.reason] += 1
+        outputs += self.integrity.on_fix(fix, meas, update)
+        if update.fused or update.reason == "gate":
+            outputs += self.monitor.gate_result(fix.t_s, update.fused)
         self._maybe_reanchor(fix.t_s)
         return outputs
+
+    def _navigators(self) -> list[Navigator]:
+        return [self.fallback] if self.primary is None else [self.primary, self.fallback]
+
+    def _select_navigator(self) -> None:
+        """The blend carries the solution while it runs on a live IMU stream."""
+        primary = self.primary
+        live = (
+            primary is not None
+            and primary.initialised
+            and self.now_s is not None
+            and self.now_s - self._last_imu_t_s <= self.config.imu_timeout_s
+        )
+        chosen = primary if live and primary is not None else self.fallback
+        if chosen is not self.navigator:
+            log.info("navigator: %s", type(chosen).__name__)
+            self.navigator = chosen
+
+    def _fuse_receiver(self, fix: GnssFix) -> bool:
+        """Fuse the primary receiver; the other only while the primary is unusable."""
+        self._rx_last_usable_t_s[fix.receiver_id] = fix.t_s
+        primary = self.config.primary_receiver
+        if fix.receiver_id == primary:
+            return True
+        last_primary = self._rx_last_usable_t_s.get(primary, -math.inf)
+        primary_down = (
+            fix.t_s - last_primary > self._outage_config.gnss_timeout_s
+            or self.integrity.exclude(primary)
+        )
+        return primary_down
+
+    def _anchor(self, frame: LocalFrame) -> None:
+        self.frame = frame
+        for nav in self._navigators():
+            nav.shift_frame(frame, frame)  # the blend takes its gravity model from the frame
 
     # ------------------------------------------------------------------ publication
 
@@ -319,6 +425,7 @@ class Engine:
         return self.navigator.predict(max(t_s, self.now_s or t_s))
 
     def _publish(self, t_s: float) -> list[Output]:
+        self._select_navigator()
         state = self._state_now(t_s)
         if state is None or self.frame is None:
             return []
@@ -336,8 +443,11 @@ class Engine:
             fix_type=self._honest_fix_type(),
             satellites=self._satellites,
         )
+        outputs: list[Output] = list(self.integrity.on_solution(solution, self._landed))
+        if not self.integrity.integrity_ok:
+            solution = _integrity_lost(solution, self.integrity.accuracy_floor_m())
         self.stats.solutions += 1
-        outputs: list[Output] = [solution]
+        outputs.insert(0, solution)
         status_tick = _tick(t_s, self.config.status_rate_hz)
         if status_tick > self._status_tick:
             self._status_tick = status_tick
@@ -373,10 +483,22 @@ class Engine:
             return
         lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
         new = LocalFrame(lat, lon, alt)
-        self.navigator.shift_frame(self.frame, new)
+        for nav in self._navigators():
+            nav.shift_frame(self.frame, new)
+        self.integrity.shift_frame(self.frame, new)
         self.frame = new
         self.stats.reanchors += 1
         log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
+
+
+def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavSolution:
+    """The solution as published while integrity is lost: no fix, accuracies at least
+    the monitor's floor (the size of the unexplained disagreement)."""
+    cov = solution.pos_cov_ned_m2.copy()
+    h_floor, v_floor = floor_m
+    for axis, floor in ((0, h_floor), (1, h_floor), (2, v_floor)):
+        cov[axis, axis] = max(cov[axis, axis], floor**2)
+    return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
 
 
 _HEADING_CODES = frozenset({AlertCode.HDG_READY, AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT})

@@ -72,7 +72,8 @@ class Pipeline:
     def __init__(self, config: Config | None = None) -> None:
         self.config = config or Config()
         self.decoder = Decoder(self.config.decoder)
-        self.engine = Engine(self.config.engine, self.config.outage, self.config.heading)
+        cfg = self.config
+        self.engine = Engine(cfg.engine, cfg.outage, cfg.heading, cfg.blend, cfg.integrity)
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()
         self.rates = RateMonitor(self.config.streams.rates_hz())

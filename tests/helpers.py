@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from companion.nav.earth import gravity_mps2
 from companion.nav.frames import LocalFrame
 from companion.types import AttitudeSample, FixType, GnssFix, ImuSample, Sample
 
@@ -75,12 +76,14 @@ def line_stream(
     """
     rng = np.random.default_rng(seed)
     vel = np.array(line.vel_ned_mps)
+    # level, unaccelerated: the accelerometer reads minus the local normal gravity
+    f_b = np.array([0.0, 0.0, -gravity_mps2(ORIGIN.lat0_rad, ORIGIN.alt0_m)])
     yaw = math.atan2(vel[1], vel[0])
     n_imu = int(duration_s * imu_hz)
     gnss_every = int(round(imu_hz / gnss_hz))
     for k in range(n_imu + 1):
         t = t0_s + k / imu_hz
-        yield ImuSample(t, t, np.array([0.0, 0.0, -9.81]), np.zeros(3), 0, "TEST")
+        yield ImuSample(t, t, f_b, np.zeros(3), 0, "TEST")
         if k % 5 == 0:
             yield AttitudeSample(t, t, 0.0, 0.0, yaw, np.zeros(3))
         if k % gnss_every == 0:

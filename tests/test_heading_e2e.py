@@ -58,29 +58,41 @@ def test_taxi_replay_reaches_ready_within_a_tenth_of_a_degree(taxi_messages):
     assert pipeline.engine.heading.correction_rad == 0.0
 
 
-def test_auto_applied_correction_is_what_global_position_int_carries(taxi_messages):
+def test_published_heading_is_corrected_against_truth(taxi_messages):
+    """Before the correction GLOBAL_POSITION_INT.hdg carries most of the autopilot's
+    ~1 deg error; after HDG_APPLIED it agrees with the true heading to well under 0.1 deg
+    on straight taxi. (In turns at ~6 deg/s the published heading lags the truth by up
+    to ~0.26 deg, about 45 ms: a known, open timing issue of the blend in turns.)"""
     cfg = Config()
     cfg = replace(cfg, heading=replace(cfg.heading, auto_apply=True))
     pipeline = Pipeline(cfg)
     frames = run(pipeline, taxi_messages)
-    assert AlertCode.HDG_APPLIED in alert_codes(pipeline)
     applied_at = next(a.t_s for a in pipeline.alerts if a.code is AlertCode.HDG_APPLIED)
-    # the autopilot's own ATTITUDE yaw (off by ~1 deg) vs what we publish after applying
-    last_att_yaw = {}
-    published = []
-    for (t, msg) in taxi_messages:
-        if msg.get_type() == "ATTITUDE":
-            last_att_yaw[msg.time_boot_ms] = msg.yaw
-    att_times = np.array(sorted(last_att_yaw))
+    truth = np.genfromtxt(TAXI.with_suffix("").with_suffix(".truth.csv"), delimiter=",",
+                          names=True, dtype=None, encoding="utf-8")
+    before, after = [], []
     for m in parse(frames):
-        if m.get_type() == "GLOBAL_POSITION_INT" and m.time_boot_ms / 1000 > applied_at + 1:
-            i = np.searchsorted(att_times, m.time_boot_ms, side="right") - 1
-            raw_deg = math.degrees(last_att_yaw[att_times[i]]) % 360
-            published.append(((m.hdg / CDEG_PER_RAD) * 180 / math.pi - raw_deg + 180) % 360 - 180)
-    assert len(published) > 100
-    correction = math.degrees(pipeline.engine.heading.correction_rad)
-    # published heading = autopilot yaw - correction (to the 0.01 deg of hdg's resolution)
-    np.testing.assert_allclose(published, -correction, atol=0.011)
+        if m.get_type() != "GLOBAL_POSITION_INT" or m.hdg == 65535:
+            continue
+        t = m.time_boot_ms / 1000
+        speed = math.hypot(m.vx, m.vy) / 100
+        if speed < 3.0:  # parked or turning slowly: heading still, but skip the stand
+            continue
+        k = int(np.searchsorted(truth["t_s"], t))
+        if not 0 < k < len(truth) or truth["t_s"][k] - t > 1e-6:
+            continue  # only the 10 Hz instants where truth is given exactly
+        turn_dps = abs((truth["yaw_deg"][k] - truth["yaw_deg"][k - 1] + 180) % 360 - 180) * 10
+        if turn_dps > 1.0:  # straight taxi only (S4's own criterion); see the note below
+            continue
+        err = ((m.hdg / CDEG_PER_RAD) * 180 / math.pi - truth["yaw_deg"][k] + 180) % 360 - 180
+        (after if t > applied_at + 1.0 else before).append(err)
+    assert len(before) > 100 and len(after) > 100
+    # before: the blend's own heading (the autopilot's, partly refined by GNSS in the
+    # taxi's turns) is still most of a degree off
+    assert np.mean(before) > 0.5 * INJECTED_DEG
+    print(f"heading error before {np.mean(before):.3f} deg, after {np.mean(after):.3f} deg")
+    assert abs(np.mean(after)) < 0.05
+    assert np.max(np.abs(after)) < 0.2
 
 
 def test_confirmation_command_applies_and_is_acknowledged(taxi_messages):

@@ -100,7 +100,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.nav import ins
-from companion.nav.frames import LocalFrame, euler_to_quat, quat_to_euler, skew
+from companion.nav.frames import LocalFrame, euler_to_quat, quat_to_euler, skew, wrap_pi
 from companion.nav.kalman import (
     Correction,
     InnovationWindow,
@@ -426,6 +426,42 @@ class BlendNavigator:
         if mech.seg_dt_s >= self.config.cov_interval_s:
             self._close_segment()
 
+    def reset_heading(self, yaw_sigma_rad: float) -> None:
+        """A taxi heading correction (S4) was applied to the attitude input: restart the
+        heading from the corrected autopilot yaw, 1-sigma ``yaw_sigma_rad``.
+
+        Attitude-aided: the filter's own yaw correction estimated part of the error the
+        S4 correction has now removed from the input; kept, it would correct twice.
+        Strapdown: the mechanisation's yaw is set to the corrected autopilot yaw.
+        Either way the yaw error's covariance restarts at ``yaw_sigma_rad``, uncorrelated.
+        """
+        if not (math.isfinite(yaw_sigma_rad) and yaw_sigma_rad > 0.0):
+            raise ValueError("yaw_sigma_rad must be finite and > 0")
+        if not self._init or self._att_q is None:
+            return
+        mech = self._mech
+        if self._strapdown:
+            target_yaw = quat_to_euler(np.array(self._att_q))[2]
+            yaw = quat_to_euler(np.array(mech.q_nb))[2]
+            turn = wrap_pi(target_yaw - yaw)
+        else:
+            w, x, y, z = self._att_corr
+            sign = 1.0 if w >= 0.0 else -1.0
+            # the correction's rotation about down (small-angle rotation vector)
+            turn = -2.0 * sign * z
+            self._att_corr = ins.quat_normalise(
+                ins.quat_mul(ins.quat_from_rotvec(0.0, 0.0, turn), self._att_corr)
+            )
+        mech.q_nb = ins.rotate_by_psi(mech.q_nb, np.array([0.0, 0.0, turn]))
+        k = ins.IA + 2
+        p = self._p
+        p[k, :] = 0.0
+        p[:, k] = 0.0
+        p[k, k] = yaw_sigma_rad**2
+        for snap in self._hist:
+            snap.q_nb = ins.rotate_by_psi(snap.q_nb, np.array([0.0, 0.0, turn]))
+        log.info("heading restarted from the taxi correction: turned %.3f deg", math.degrees(turn))
+
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """Take the autopilot's attitude (yaw less ``yaw_correction_rad``).
 
@@ -465,6 +501,12 @@ class BlendNavigator:
         self._gnss_error_block(meas.fix_type, r_pos_rep * scale[:3])
         idx, pos_m, vel_m, q_m = self._state_at(meas.t_s)
         p_m = self._hist[idx].p_mat
+        dt_p = meas.t_s - self._hist[idx].t_s
+        if dt_p > 0.0:
+            # the snapshot's covariance is up to cov_interval_s older than the fix: carry it
+            # (negligible in steady flight, not while the velocity is uncertain: after the
+            # first fix, where GPS_RAW_INT gives no vertical velocity, and after an outage)
+            p_m = _carry_pos_vel(p_m, dt_p, self.diag.accel_psd_ned)
         mat_nb = ins.quat_to_mat(q_m)
         rows, y, h_mat, r_rep = self._measurement(meas, pos_m, vel_m, mat_nb, r_pos_rep, r_vel_rep)
         if self._gm:  # the white part of the position noise; the rest is in states 15:18
@@ -491,7 +533,12 @@ class BlendNavigator:
         self.diag.r_used = np.full(6, np.nan)
         self.diag.r_used[rows] = r_diag
         self.diag.r_used[:3] = r_pos_rep * scale[:3]
-        self._apply(idx, corr.dx, corr.p_post)
+        # the correction is for the fix time; injected at the snapshot, its position part
+        # moves with its velocity part over the time between them (a 2 m/s correction
+        # 0.05 s away would otherwise plant 0.1 m of position error)
+        dx = corr.dx.copy()
+        dx[0:3] += (self._hist[idx].t_s - meas.t_s) * dx[3:6]
+        self._apply(idx, dx, corr.p_post)
         self._last_fuse_t_s = meas.t_s
         self.diag.fused += 1
         return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
@@ -514,7 +561,14 @@ class BlendNavigator:
             + q_acc * dt_p**3 / 3.0
         )
         p_vel = p[3:6, 3:6] + q_acc * dt_p
-        _, _, yaw = quat_to_euler(np.array(mech.q_nb))
+        q_nb = np.array(mech.q_nb)
+        _, _, yaw = quat_to_euler(q_nb)
+        if dt > 0.0:
+            # carry the heading with the latest body rate (turns at 10 deg/s move it
+            # 0.2 deg in one 50 Hz IMU period)
+            rate_b = np.array(mech.last_gyro_b_radps) - np.array(mech.bg)
+            yaw_rate = float((ins.quat_to_mat(mech.q_nb) @ rate_b)[2])
+            yaw = wrap_pi(yaw + yaw_rate * dt)
         return NavState(t_s, pos + vel * dt, vel, 0.5 * (p_pos + p_pos.T), p_vel, yaw)
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
@@ -806,12 +860,19 @@ class BlendNavigator:
         dt = t_s - self._last_fuse_t_s
         dp = (p_prior.diagonal() - p_post.diagonal())[3:6].tolist()
         dxv = dx[3:6].tolist()
+        # an unmodelled noise dQ shows in dx_v only through the part of the velocity error
+        # the update removes, (K H)_vv: the raw K (eta eta^T - S) K^T sees dQ (K H)_vv^2
+        # (worst on the down axis, which GPS_RAW_INT observes through position only);
+        # dividing by it makes the increment unbiased. Floored: an axis the fix barely
+        # observes cannot say much about its noise.
+        kh = np.einsum("ij,ji->i", corr.gain[3:6], h_mat[:, 3:6])
+        kh2 = np.maximum(kh, _KH_FLOOR) ** 2
         psd = self.diag.accel_psd_ned
         lo, hi = cfg.q_scale_bounds
         q0 = self._accel_psd0
         new = psd.copy()
         for i in range(3):
-            self._q_win.add(i, float(psd[i]) + (dxv[i] ** 2 - dp[i]) / dt)
+            self._q_win.add(i, float(psd[i]) + (dxv[i] ** 2 - dp[i]) / (dt * float(kh2[i])))
             if self._q_win.count(i) >= cfg.adaptive_min_epochs:
                 new[i] = min(max(self._q_win.mean(i), lo * q0), hi * q0)
         if np.any(np.abs(new - psd) > 1e-3 * psd):
@@ -949,3 +1010,23 @@ def _mat_to_quat(mat: FloatArray) -> ins.Quat:
     q[1 + j] = (mat[j, i] + mat[i, j]) / s
     q[1 + k] = (mat[k, i] + mat[i, k]) / s
     return ins.quat_normalise((q[0], q[1], q[2], q[3]))
+
+
+_KH_FLOOR = 0.3
+"""Smallest (K H)_vv the adaptive Q divides by (see BlendNavigator._adapt)."""
+
+
+def _carry_pos_vel(p: FloatArray, dt_s: float, accel_psd_ned: FloatArray) -> FloatArray:
+    """Covariance carried ``dt_s`` forward through ``position += velocity * dt`` with white
+    acceleration noise of PSD ``accel_psd_ned`` [m^2/s^3]: the dominant coupling over a
+    fraction of a covariance interval. ``p`` is (N_STATE, N_STATE)."""
+    n = p.shape[0]
+    phi = np.eye(n)
+    phi[0:3, 3:6] = np.eye(3) * dt_s
+    q_acc = np.diag(accel_psd_ned)
+    carried = phi @ p @ phi.T
+    carried[0:3, 0:3] += q_acc * dt_s**3 / 3.0
+    carried[0:3, 3:6] += q_acc * dt_s**2 / 2.0
+    carried[3:6, 0:3] += q_acc * dt_s**2 / 2.0
+    carried[3:6, 3:6] += q_acc * dt_s
+    return carried

@@ -130,6 +130,9 @@ class SingerNavigator:
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """No use for the attitude."""
 
+    def reset_heading(self, yaw_sigma_rad: float) -> None:
+        """No heading state."""
+
     def _propagate(self, t_s: float) -> tuple[FloatArray, FloatArray]:
         if self._t_s is None:
             raise ValueError("propagate on an uninitialised navigator")

@@ -106,6 +106,12 @@ class Navigator(Protocol):
         """Forget everything (autopilot reboot, re-initialisation)."""
         ...
 
+    def reset_heading(self, yaw_sigma_rad: float) -> None:
+        """A taxi heading correction (S4) was applied to the attitude input: restart the
+        navigator's own heading error from it, with 1-sigma ``yaw_sigma_rad``
+        (navigators without an attitude ignore it)."""
+        ...
+
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express the state in a new local frame (re-anchoring on long legs)."""
         ...

@@ -82,6 +82,9 @@ class PassthroughNavigator:
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """No use for the attitude."""
 
+    def reset_heading(self, yaw_sigma_rad: float) -> None:
+        """No heading state."""
+
     def predict(self, t_s: float) -> NavState | None:
         """Constant-velocity extrapolation to ``t_s`` with a growing covariance."""
         if self._t_s is None:
