@@ -3,7 +3,9 @@
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
-DEMO ?= approach_rtk_outage_20s
+DEMO ?= approach_rtk20
+# the IMU grade of the demo flight (tactical.toml); empty for the MEMS-grade fixtures
+DEMO_CONFIG ?= sitl_fixtures/tactical.toml
 
 .PHONY: setup demo test lint bench clean
 
@@ -17,7 +19,7 @@ $(VENV)/.installed: pyproject.toml
 
 demo: setup
 	mkdir -p out
-	$(BIN)/companion replay sitl_fixtures/$(DEMO).tlog --output out/$(DEMO).out.tlog
+	$(BIN)/companion replay sitl_fixtures/$(DEMO).tlog --output out/$(DEMO).out.tlog $(if $(DEMO_CONFIG),--config $(DEMO_CONFIG))
 	$(BIN)/companion evaluate out/$(DEMO).out.tlog --truth sitl_fixtures/$(DEMO).truth.csv --plot out/$(DEMO).png
 
 lint: setup
