@@ -156,7 +156,6 @@ def gnss_measurement(fix: GnssFix, frame: LocalFrame) -> GnssMeasurement:
 class EngineStats:
     """Counters a driver prints in its summary."""
 
-    samples: Counter[str] = field(default_factory=Counter)
     gnss: Counter[str] = field(default_factory=Counter)
     alerts: Counter[str] = field(default_factory=Counter)
     solutions: int = 0
@@ -166,6 +165,10 @@ class EngineStats:
 
 class Engine:
     """Samples in, outputs out. See the module docstring."""
+
+    def sample_counts(self) -> dict[str, int]:
+        """Samples handled, by type name."""
+        return {kind.__name__: n for kind, n in self._sample_counts.items()}
 
     def __init__(
         self,
@@ -183,6 +186,8 @@ class Engine:
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
+        self._sample_counts: Counter[type] = Counter()
+        self._publish_rate_hz = self.config.publish_rate_hz
         self.stats = EngineStats()
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
             ImuSample: self._on_imu,  # type: ignore[dict-item]
@@ -210,10 +215,13 @@ class Engine:
         self.integrity = IntegrityMonitor(self._integrity_config)
         self._landed: LandedState | None = None
         self._airborne = False
+        self._speed_mps: float | None = None
+        """Ground speed of the last published state (the stale-fix test's motion)."""
         self._rx_last_usable_t_s: dict[int, float] = {}
         self.frame: LocalFrame | None = None
         self.now_s: float | None = None
         self._publish_tick = -1
+        self._next_monitor_tick_s = -math.inf
         self._status_tick = -1
         self._last_fused_fix: GnssFix | None = None
         self._yaw_rad: float | None = None
@@ -225,20 +233,27 @@ class Engine:
     def handle(self, sample: Sample) -> list[Output]:
         """Take one sample; return what to publish (possibly nothing)."""
         kind = type(sample)
-        self.stats.samples[kind.__name__] += 1
+        self._sample_counts[kind] += 1
         if self._pending_state is not None:
             self._restore_now(sample.t_s)
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []
         t_s = sample.t_s
-        if self.now_s is None or t_s > self.now_s:
-            self.now_s = t_s
-        if self.now_s is not None and self.monitor.last_fused_t_s is not None:
-            outputs += self.monitor.tick(self.now_s)
-            tick = _tick(self.now_s, self.config.publish_rate_hz)
+        now = self.now_s
+        if now is None or t_s > now:
+            self.now_s = now = t_s
+        if self.monitor.last_fused_t_s is not None:
+            # hot path (every IMU sample): the outage clock is ticked at most every
+            # _TICK_S, publication when the integer period index advances
+            if now >= self._next_monitor_tick_s:
+                self._next_monitor_tick_s = now + _TICK_S
+                outputs += self.monitor.tick(now)
+            tick = math.floor(now * self._publish_rate_hz + 1e-6)
             if tick > self._publish_tick:
                 self._publish_tick = tick
-                outputs += self._publish(self.now_s)
+                outputs += self._publish(now)
+        if not outputs:
+            return outputs
         for out in outputs:
             if isinstance(out, Alert):
                 self.stats.alerts[out.code.value] += 1
@@ -258,7 +273,8 @@ class Engine:
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
-        self.heading.on_attitude(sample)
+        if not self._airborne:  # S4 runs on the ground before take-off
+            self.heading.on_attitude(sample)
         if self.primary is not None:
             self.primary.on_attitude(sample, self.heading.correction_rad)
         return []
@@ -334,9 +350,7 @@ class Engine:
         # correction (applied or not) stands for the rest of the flight
         outputs: list[Output] = [] if self._airborne else self.heading.on_gnss(fix)
         self._select_navigator()
-        pred = self._state_now(fix.t_s)
-        nav_speed = float(np.hypot(*pred.vel_ned_mps[:2])) if pred is not None else None
-        verdict = self.monitor.assess(fix, nav_speed)
+        verdict = self.monitor.assess(fix, self._speed_mps)
         outputs += verdict.alerts
         if not verdict.usable:
             self.stats.gnss[verdict.reason] += 1
@@ -379,7 +393,6 @@ class Engine:
         outputs += self.integrity.on_fix(fix, meas, update)
         if update.fused or update.reason == "gate":
             outputs += self.monitor.gate_result(fix.t_s, update.fused)
-        self._maybe_reanchor(fix.t_s)
         return outputs
 
     def _navigators(self) -> list[Navigator]:
@@ -429,6 +442,11 @@ class Engine:
         state = self._state_now(t_s)
         if state is None or self.frame is None:
             return []
+        self._speed_mps = float(np.hypot(state.vel_ned_mps[0], state.vel_ned_mps[1]))
+        if self._maybe_reanchor(state):
+            state = self._state_now(t_s)
+            if state is None:  # shifting a state never uninitialises it; keeps mypy honest
+                return []
         lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
         solution = NavSolution(
             t_s=t_s,
@@ -473,14 +491,13 @@ class Engine:
             return FixType.FIX_3D
         return FixType(min(int(self._last_fused_fix.fix_type), int(FixType.RTK_FIXED)))
 
-    def _maybe_reanchor(self, t_s: float) -> None:
-        if self.frame is None:
-            return
-        state = self._state_now(t_s)
-        if state is None or self.frame.distance_from_anchor_m(state.pos_ned_m) < (
+    def _maybe_reanchor(self, state: NavState) -> bool:
+        """Re-anchor the frame at the solution when it is far from the anchor; True if it
+        did (states computed before are then in the old frame)."""
+        if self.frame is None or self.frame.distance_from_anchor_m(state.pos_ned_m) < (
             self.config.reanchor_distance_m
         ):
-            return
+            return False
         lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
         new = LocalFrame(lat, lon, alt)
         for nav in self._navigators():
@@ -489,6 +506,7 @@ class Engine:
         self.frame = new
         self.stats.reanchors += 1
         log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
+        return True
 
 
 def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavSolution:
@@ -500,6 +518,9 @@ def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavS
         cov[axis, axis] = max(cov[axis, axis], floor**2)
     return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
 
+
+_TICK_S = 0.05
+"""Outage-clock resolution: GNSS_LOST is raised within this of its timeout."""
 
 _HEADING_CODES = frozenset({AlertCode.HDG_READY, AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT})
 

@@ -90,20 +90,24 @@ class Pipeline:
         self.stats.messages_in += 1
         frames: list[bytes] = []
         samples = self.decoder.decode(msg, t_rx_s)
+        if not samples:
+            return frames
         for sample in samples:
-            if isinstance(sample, HeartbeatSample):
-                frames += self._on_autopilot_heartbeat(sample)
-            elif isinstance(sample, RebootEvent):
+            kind = type(sample)
+            if kind is HeartbeatSample:
+                frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
+            elif kind is RebootEvent:
                 frames += self._request_streams()
             else:
-                self.rates.observe(msg.get_type(), sample.t_s)
+                self.rates.observe(msg._type, sample.t_s)
             outputs = self.engine.handle(sample)
             for out in outputs:
                 frames += self._encode(out)
-            if isinstance(sample, HeadingCommand):
-                frames += self._acknowledge(msg, sample, outputs)
-        if samples:
-            frames += self._check_rates(samples[-1].t_s)
+            if kind is HeadingCommand:
+                frames += self._acknowledge(msg, sample, outputs)  # type: ignore[arg-type]
+        t_s = samples[-1].t_s
+        if self._next_rate_check_s is None or t_s >= self._next_rate_check_s:
+            frames += self._check_rates(t_s)
         return frames
 
     def bad_frames(self, count: int) -> None:

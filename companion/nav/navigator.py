@@ -17,8 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-import numpy as np
-
 from companion.nav.frames import LocalFrame
 from companion.types import AttitudeSample, FixType, FloatArray, ImuSample
 
@@ -122,17 +120,4 @@ def rotation_between_frames(old: LocalFrame, new: LocalFrame) -> FloatArray:
 
     Computed from the two frames' ECEF-to-NED rotations (C_new_e @ C_e_old).
     """
-    return _mat_ne(new) @ _mat_ne(old).T
-
-
-def _mat_ne(frame: LocalFrame) -> FloatArray:
-    """ECEF-to-NED rotation at the frame's anchor."""
-    sl, cl = np.sin(frame.lat0_rad), np.cos(frame.lat0_rad)
-    so, co = np.sin(frame.lon0_rad), np.cos(frame.lon0_rad)
-    return np.array(
-        [
-            [-sl * co, -sl * so, cl],
-            [-so, co, 0.0],
-            [-cl * co, -cl * so, -sl],
-        ]
-    )
+    return new.mat_ne() @ old.mat_ne().T
