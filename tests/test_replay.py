@@ -1,0 +1,112 @@
+"""Replay contract: deterministic, the promised messages from component 191 at the
+GNSS rate, readable by pymavlink; bad input is a one-line error and a non-zero exit."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+
+from companion.cli import main
+from companion.replay import replay
+
+ROOT = Path(__file__).resolve().parent.parent
+FIXTURE = ROOT / "sitl_fixtures" / "approach_rtk20.tlog"
+
+
+@pytest.fixture(scope="module")
+def replayed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("replay")
+    first, second = out / "a.tlog", out / "b.tlog"
+    summary = replay(FIXTURE, first)
+    replay(FIXTURE, second)
+    return summary, first, second
+
+
+def test_replay_is_byte_identical(replayed):
+    _, first, second = replayed
+    assert first.read_bytes() == second.read_bytes()
+    assert first.stat().st_size > 100_000
+
+
+def test_output_reads_back_with_pymavlink_at_the_gnss_rate(replayed):
+    summary, first, _ = replayed
+    conn = mavutil.mavlink_connection(str(first), dialect="ardupilotmega")
+    kinds: Counter[str] = Counter()
+    components = set()
+    times: dict[str, list[float]] = {"GLOBAL_POSITION_INT": [], "GPS_INPUT": []}
+    while (msg := conn.recv_msg()) is not None:
+        if msg.get_type() == "BAD_DATA":
+            continue
+        kinds[msg.get_type()] += 1
+        components.add(msg.get_srcComponent())
+        if msg.get_type() == "GLOBAL_POSITION_INT":
+            times["GLOBAL_POSITION_INT"].append(msg.time_boot_ms / 1000)
+        elif msg.get_type() == "GPS_INPUT":
+            times["GPS_INPUT"].append(msg.time_usec / 1e6)
+    assert components == {191}
+    assert {"HEARTBEAT", "GLOBAL_POSITION_INT", "GPS_INPUT"} <= set(kinds)
+    # the fixture's GNSS is 10 Hz; so is publication, without gaps: each solution is
+    # published by the first sample past its tick, so at most one IMU period (10 ms
+    # at this fixture's 100 Hz) late
+    for name, t in times.items():
+        rate = np.median(1.0 / np.diff(t))
+        assert rate == pytest.approx(10.0, rel=0.01), name
+        assert np.max(np.diff(t[1:])) <= 0.1 + 0.010 + 1e-6, name
+    assert kinds["HEARTBEAT"] == pytest.approx(summary.log_duration_s, abs=2)
+    assert summary.messages_out == sum(kinds.values())
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "companion", *args],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["replay", "missing.tlog", "--output", "{tmp}/o.tlog"], "cannot open tlog"),
+        (
+            ["replay", str(FIXTURE), "--output", "{tmp}/o.tlog", "--config", "nope.toml"],
+            "config file not found",
+        ),
+        (["simulate", "no_such_flight", "--out", "{tmp}"], "no_such_flight"),
+        (["simulate", "taxi", "--out", "{tmp}", "--duration", "-5"], "duration"),
+        (["evaluate", "missing.tlog", "--truth", "missing.csv"], "missing"),
+    ],
+)
+def test_bad_input_is_one_line_and_nonzero(tmp_path, args, message):
+    done = run_cli(*(a.replace("{tmp}", str(tmp_path)) for a in args))
+    assert done.returncode != 0
+    lines = [line for line in done.stderr.splitlines() if "error" in line]
+    assert len(lines) == 1 and message in lines[0], done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_unreadable_tlog_content_is_counted_not_fatal(tmp_path):
+    garbage = tmp_path / "garbage.tlog"
+    garbage.write_bytes(np.random.default_rng(1).bytes(50_000))
+    assert (
+        main(
+            [
+                "--log-level",
+                "error",
+                "replay",
+                str(garbage),
+                "--output",
+                str(tmp_path / "o.tlog"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
