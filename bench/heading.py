@@ -112,21 +112,27 @@ def draw_scenario(rng: np.random.Generator) -> dict[str, object]:
     }
 
 
+def uses_position_track(config: HeadingConfig) -> bool:
+    """The bench's taxis are RTK fixed throughout, so ``auto`` takes the position track."""
+    return config.track_source in ("position", "auto")
+
+
 def cycle_period_s(config: HeadingConfig) -> float:
     """Time between two cycles on a straight leg, s."""
-    return config.pos_baseline_s if config.track_source == "position" else 1.0 / GNSS_RATE_HZ
+    return config.pos_baseline_s if uses_position_track(config) else 1.0 / GNSS_RATE_HZ
 
 
 def predicted_ready_s(config: HeadingConfig, speed_mps: float, noise_mps: float) -> float:
     """Straight-taxi time the sufficiency rule needs with white noise, s."""
-    if config.track_source == "position":
+    if uses_position_track(config):
         dist = speed_mps * config.pos_baseline_s
         sig2 = 2.0 * config.pos_diff_sigma_m**2 / dist**2
     else:
         sig2 = (noise_mps / speed_mps) ** 2
     sig2 += math.radians(config.ins_yaw_noise_deg) ** 2
     cycles = (config.z_score * math.sqrt(sig2) / math.radians(config.eps_limit_deg)) ** 2 + 1.0
-    return max(cycles, config.min_cycles) * cycle_period_s(config)
+    min_cycles = config.pos_min_cycles if uses_position_track(config) else config.min_cycles
+    return max(cycles, min_cycles) * cycle_period_s(config)
 
 
 def run_s4(flight: SimFlight, config: HeadingConfig, speed: float, noise: float) -> S4Result:
@@ -230,8 +236,8 @@ GRADE = make_scenario("taxi").imu_grade
 
 CONFIGS: dict[str, HeadingConfig] = {
     "default (auto: RTK position track)": HeadingConfig(),
-    "S4 velocity track, eps<=0.05": HeadingConfig(track_source="velocity"),
-    "S4 velocity track, eps<=0.085": HeadingConfig(
+    "velocity track (S4), eps<=0.05": HeadingConfig(track_source="velocity"),
+    "velocity track (S4), eps<=0.085": HeadingConfig(
         track_source="velocity", eps_limit_deg=TARGET_MAX_ERR_DEG / 1.96
     ),
 }
@@ -281,9 +287,9 @@ def main() -> int:
         def col(attr: str, rs: list[S4Result] = rs) -> np.ndarray:
             return np.array([getattr(x, attr) for x in rs], dtype=float)
 
-        print(err_row(f"S4 {name} mean-inj", col("err_mean_deg"), n, base_max))
-        print(err_row(f"S4 {name} heading", col("err_heading_deg"), n, base_max))
-        print(err_row(f"S4 {name} estimator", col("err_estimator_deg"), n, base_max))
+        print(err_row(f"{name} mean-inj", col("err_mean_deg"), n, base_max))
+        print(err_row(f"{name} heading", col("err_heading_deg"), n, base_max))
+        print(err_row(f"{name} estimator", col("err_estimator_deg"), n, base_max))
     name0 = next(iter(CONFIGS))
     unc = np.array([r.s4[name0].err_uncorrected_deg for r in results])
     print(err_row("uncorrected (at default READY)", unc, n, base_max))
@@ -293,8 +299,8 @@ def main() -> int:
     print(f"{'method':<54} {'median':>8} {'95 %':>8} {'max':>8}")
     for name in CONFIGS:
         rs = [r.s4[name] for r in results if r.s4[name].ready]
-        print(time_row(f"S4 {name}: straight taxi used", np.array([x.straight_s for x in rs])))
-        print(time_row(f"S4 {name}: since taxi start", np.array([x.taxi_s for x in rs])))
+        print(time_row(f"{name}: straight taxi used", np.array([x.straight_s for x in rs])))
+        print(time_row(f"{name}: since taxi start", np.array([x.taxi_s for x in rs])))
     bt = base[np.isfinite(base)]
     print(
         time_row(
