@@ -69,7 +69,6 @@ import json
 import logging
 import math
 import re
-import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -81,6 +80,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from scipy import stats
 
 from companion.mavlink import units
+from companion.mavlink.tlog import TlogError, TlogReader
 from companion.types import FloatArray
 
 _log = logging.getLogger(__name__)
@@ -112,9 +112,6 @@ ALERT_EARLY_TOLERANCE_S = 0.5
 """An alert this much before an event's start still belongs to it (alert-time mapping), s."""
 ACCURACY_MAX_AGE_S = 1.0
 """A published accuracy older than this no longer applies to a solution, s."""
-RESYNC_MAX_JUMP_S = 3.0 * 24.0 * 3600.0
-"""When resynchronising after a corrupt tlog record, a candidate timestamp must be within
-this of the last good one (the same rule pymavlink's log reader uses), s."""
 MISMATCH_MEDIAN_DISTANCE_M = 50_000.0
 """A median horizontal distance beyond this between the solution and the truth means the
 truth belongs to another flight ("mismatched truth"), m."""
@@ -145,9 +142,6 @@ _HDG_N_RE = re.compile(r"n\s*=\s*(?P<n>\d+)")
 
 _STATUSTEXT_LEN = mavlink2.MAVLink_statustext_message.array_lengths[1]
 """Characters in one STATUSTEXT chunk; a shorter chunk ends a multi-chunk text."""
-_MAGIC_V2 = 0xFD
-_MAGIC_V1 = 0xFE
-_TS_BYTES = 8
 
 
 class EvaluationError(Exception):
@@ -159,12 +153,12 @@ class EvaluationError(Exception):
 
 @dataclass(frozen=True, slots=True)
 class TlogStats:
-    """What reading the tlog found: good records, corrupt ones skipped, unknown message ids."""
+    """What reading the tlog found: good records, corrupt regions skipped (garbage, bad
+    CRC, unknown message ids), a cut-short last record."""
 
     records: int
     bad_records: int
-    unknown_messages: int
-    trailing_bytes: int
+    truncated_records: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -353,7 +347,7 @@ class Evaluation:
         )
         lines.append(
             f"tlog: {self.tlog.records} records, {self.tlog.bad_records} corrupt skipped,"
-            f" {self.tlog.unknown_messages} unknown ids"
+            f" {self.tlog.truncated_records} truncated"
         )
         lines.append("")
         lines.append(
@@ -409,11 +403,10 @@ class Evaluation:
 
 
 def _read_tlog(path: Path) -> tuple[list[tuple[float, Any]], TlogStats]:
-    """Read a tlog: records of an 8-byte big-endian UNIX-epoch microsecond stamp + a frame.
+    """Read a tlog with the service's robust reader (:class:`TlogReader`).
 
-    Corrupt records (bad magic, bad CRC, bad length) are skipped and counted; the reader
-    resynchronises on the next position holding a MAVLink magic byte after a plausible
-    timestamp whose frame decodes. A truncated last record is counted in ``trailing_bytes``.
+    Corrupt regions (bad magic, CRC or length, unknown message ids, garbage) are
+    skipped and counted; a cut-short last record is counted as truncated.
 
     Returns
     -------
@@ -422,88 +415,18 @@ def _read_tlog(path: Path) -> tuple[list[tuple[float, Any]], TlogStats]:
     stats : TlogStats
     """
     try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise EvaluationError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    mav = mavlink2.MAVLink(None)
-    records: list[tuple[float, Any]] = []
-    bad = 0
-    unknown = 0
-    pos = 0
-    size = len(data)
-    last_t: float | None = None
-    in_bad_run = False
-    while pos + _TS_BYTES + 1 <= size:
-        frame_info = _frame_at(data, pos, last_t)
-        if frame_info is None:
-            if not in_bad_run:
-                bad += 1
-                in_bad_run = True
-            pos = _next_candidate(data, pos + 1)
-            continue
-        t_rx, frame_len, msgid = frame_info
-        start = pos + _TS_BYTES
-        if start + frame_len > size:
-            break  # truncated final record
-        frame = data[start : start + frame_len]
-        if msgid not in mavlink2.mavlink_map:
-            unknown += 1
-            in_bad_run = False
-            pos = start + frame_len
-            last_t = t_rx
-            continue
-        try:
-            msg = mav.decode(bytearray(frame))
-        except (mavlink2.MAVError, struct.error, ValueError, IndexError, TypeError):
-            if not in_bad_run:
-                bad += 1
-                in_bad_run = True
-            pos = _next_candidate(data, pos + 1)
-            continue
-        in_bad_run = False
-        records.append((t_rx, msg))
-        last_t = t_rx
-        pos = start + frame_len
-    trailing = size - pos if pos < size else 0
+        reader = TlogReader(path)
+    except TlogError as exc:
+        raise EvaluationError(str(exc)) from exc
+    records = list(reader)
+    bad = reader.stats["bad_region"]
     if bad:
-        _log.warning("%s: skipped %d corrupt tlog record(s)", path, bad)
+        _log.warning("%s: skipped %d corrupt tlog region(s)", path, bad)
     return records, TlogStats(
-        records=len(records), bad_records=bad, unknown_messages=unknown, trailing_bytes=trailing
+        records=len(records),
+        bad_records=bad,
+        truncated_records=reader.stats["truncated_record"],
     )
-
-
-def _frame_at(data: bytes, pos: int, last_t: float | None) -> tuple[float, int, int] | None:
-    """Timestamp, frame length and message id of a record at ``pos``, or None if implausible."""
-    (t_us,) = struct.unpack_from(">Q", data, pos)
-    t_rx = t_us / units.US_PER_S
-    if last_t is not None and abs(t_rx - last_t) > RESYNC_MAX_JUMP_S:
-        return None
-    start = pos + _TS_BYTES
-    magic = data[start]
-    if magic == _MAGIC_V2:
-        if start + 10 > len(data):
-            return t_rx, 12, -1  # header cut short: a truncated final record
-        payload_len = data[start + 1]
-        signed = data[start + 2] & mavlink2.MAVLINK_IFLAG_SIGNED
-        frame_len = 12 + payload_len + (13 if signed else 0)
-        msgid = data[start + 7] | (data[start + 8] << 8) | (data[start + 9] << 16)
-        return t_rx, frame_len, msgid
-    if magic == _MAGIC_V1:
-        if start + 6 > len(data):
-            return t_rx, 8, -1  # header cut short: a truncated final record
-        payload_len = data[start + 1]
-        return t_rx, 8 + payload_len, data[start + 5]
-    return None
-
-
-def _next_candidate(data: bytes, pos: int) -> int:
-    """Smallest record start >= pos whose frame byte is a MAVLink magic (or end of data)."""
-    best = len(data)
-    for magic in (_MAGIC_V2, _MAGIC_V1):
-        idx = data.find(bytes([magic]), pos + _TS_BYTES)
-        if idx != -1:
-            best = min(best, idx - _TS_BYTES)
-    return best
 
 
 @dataclass(frozen=True, slots=True, eq=False)
