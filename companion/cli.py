@@ -168,20 +168,18 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     _setup_logging(args.log_level)
     from companion.config import ConfigError
+    from companion.evaluate import EvaluationError
+    from companion.mavlink.link import LinkError
+    from companion.mavlink.tlog import TlogError
 
-    expected: tuple[type[BaseException], ...] = (ConfigError, ValueError, FileNotFoundError)
-    try:
-        from companion.mavlink.tlog import TlogError
-
-        expected += (TlogError,)
-    except ImportError:  # the package is incomplete only in a broken install
-        pass
-    try:
-        from companion.evaluate import EvaluationError
-
-        expected += (EvaluationError,)
-    except ImportError:
-        pass
+    expected = (
+        ConfigError,
+        ValueError,
+        FileNotFoundError,
+        TlogError,
+        EvaluationError,
+        LinkError,
+    )
     try:
         return int(args.func(args))
     except expected as exc:

@@ -29,6 +29,7 @@ failures are counted in :attr:`Link.send_failures` and logged (rate-limited).
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import contextlib
 import logging
@@ -89,7 +90,7 @@ def parse_url(url: str, baud: int = 57600) -> tuple[str, Any, Any]:
     raise LinkError(f"bad link URL {url!r}: unknown scheme {scheme!r}")
 
 
-class Link:
+class Link(abc.ABC):
     """Common interface of every transport.
 
     Attributes
@@ -114,13 +115,13 @@ class Link:
         """True once :meth:`close` was called."""
         return self._closed
 
+    @abc.abstractmethod
     async def recv(self) -> bytes:
         """Next chunk of bytes (never empty). Raises LinkError when the link drops."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     async def send(self, data: bytes) -> None:
         """Send bytes, best effort (never raises on a dropped peer)."""
-        raise NotImplementedError
 
     async def close(self) -> None:
         """Release the transport; idempotent."""
