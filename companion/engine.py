@@ -437,7 +437,10 @@ class Engine:
             return None
         return self.navigator.predict(max(t_s, self.now_s or t_s))
 
-    def _publish(self, t_s: float) -> list[Output]:
+    def _publish(self, now_s: float) -> list[Output]:
+        # the solution is carried to the next whole millisecond: GLOBAL_POSITION_INT's
+        # time_boot_ms is what a receiver aligns it by
+        t_s = math.ceil(now_s * 1000.0 - 1e-6) / 1000.0
         self._select_navigator()
         state = self._state_now(t_s)
         if state is None or self.frame is None:

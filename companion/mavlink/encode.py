@@ -323,7 +323,9 @@ class Encoder:
         yaw_cd: int | None = None
         if sol.yaw_rad is not None and math.isfinite(sol.yaw_rad):
             yaw_cd = int(round((sol.yaw_rad % (2.0 * math.pi)) * units.CDEG_PER_RAD)) % _CDEG_FULL
-        time_boot_ms = int(sol.t_s * units.MS_PER_S) % (1 << 32)
+        # the engine publishes at whole milliseconds; round, never truncate (a truncated
+        # millisecond is 3 cm along-track at approach speed)
+        time_boot_ms = round(sol.t_s * units.MS_PER_S) % (1 << 32)
         k = units.CM_PER_M
         gpi = self._mod.MAVLink_global_position_int_message(
             time_boot_ms,
@@ -357,7 +359,7 @@ class Encoder:
                 yaw_field = yaw_cd if yaw_cd != 0 else _CDEG_FULL
             out.append(
                 self._mod.MAVLink_gps_input_message(
-                    int(sol.t_s * units.US_PER_S),
+                    round(sol.t_s * units.US_PER_S),
                     cfg.gps_id,
                     0,  # ignore_flags: every field is provided
                     0,  # time_week_ms: no GPS time
@@ -387,7 +389,7 @@ class Encoder:
                     self.system_id,
                     units.MAV_COMP_ID_AUTOPILOT1,
                     cfg.gps_id,
-                    int(sol.t_s * units.US_PER_S),
+                    round(sol.t_s * units.US_PER_S),
                     0,
                     GLOBAL_POSITION_SRC_ESTIMATOR,
                     GLOBAL_POSITION_PRIMARY if healthy else GLOBAL_POSITION_UNHEALTHY,
@@ -429,7 +431,7 @@ class Encoder:
             return []
         return [
             self._mod.MAVLink_named_value_float_message(
-                int(nv.t_s * units.MS_PER_S) % (1 << 32), nv.name.encode("ascii"), float(nv.value)
+                round(nv.t_s * units.MS_PER_S) % (1 << 32), nv.name.encode("ascii"), float(nv.value)
             )
         ]
 
