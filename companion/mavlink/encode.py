@@ -116,7 +116,9 @@ class EncoderConfig:
     uere_m
         Nominal user-equivalent range error used to derive HDOP/VDOP, m.
     gps_input_yaw
-        Send the solution's yaw in GPS_INPUT.yaw.
+        Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
+        autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
+        be a deliberate choice.
     statustext_min_interval_s
         Least time between two STATUSTEXTs of the same alert code, s.
     statustext_interval_overrides
@@ -131,7 +133,7 @@ class EncoderConfig:
     min_v_acc_m: float = 0.01
     min_vel_acc_mps: float = 0.01
     uere_m: float = 1.0
-    gps_input_yaw: bool = True
+    gps_input_yaw: bool = False
     statustext_min_interval_s: float = 5.0
     statustext_interval_overrides: tuple[tuple[str, float], ...] = ()
     dialect: str = "ardupilotmega"

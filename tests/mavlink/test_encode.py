@@ -64,7 +64,7 @@ def roundtrip(enc: Encoder, msgs: list, module: object = apm) -> list:
 
 
 def test_solution_for_ardupilot_is_gpi_plus_gps_input() -> None:
-    enc = Encoder(system_id=7)
+    enc = Encoder(EncoderConfig(gps_input_yaw=True), system_id=7)
     gpi, gin = roundtrip(enc, enc.encode(solution(), AutopilotFlavour.ARDUPILOT))
     assert gpi.get_type() == "GLOBAL_POSITION_INT" and gin.get_type() == "GPS_INPUT"
     assert gpi.time_boot_ms == 123456
@@ -85,7 +85,7 @@ def test_solution_for_ardupilot_is_gpi_plus_gps_input() -> None:
 
 
 def test_relative_alt_and_yaw_north_and_unknown() -> None:
-    enc = Encoder()
+    enc = Encoder(EncoderConfig(gps_input_yaw=True))
     enc.encode(solution(), AutopilotFlavour.ARDUPILOT)
     s2 = solution(yaw=0.0)
     s2 = NavSolution(**{**{k: getattr(s2, k) for k in s2.__slots__}, "alt_msl_m": 500.0})
@@ -220,3 +220,9 @@ def test_closed_form_accuracies_match_navsolution_properties() -> None:
         assert gin.horiz_accuracy == pytest.approx(sol.h_acc_m, rel=1e-6)
         assert gin.vert_accuracy == pytest.approx(sol.v_acc_m, rel=1e-6)
         assert gin.speed_accuracy == pytest.approx(sol.vel_acc_mps, rel=1e-6)
+
+
+def test_gps_input_yaw_is_off_by_default() -> None:
+    """The autopilot would fuse GPS_INPUT.yaw as a GNSS heading: only when configured."""
+    gpi, gin = Encoder().encode(solution(yaw=0.3), AutopilotFlavour.ARDUPILOT)
+    assert gin.yaw == 0 and gpi.hdg != 65535
