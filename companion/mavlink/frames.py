@@ -165,32 +165,8 @@ class FrameParser:
 
         Incomplete trailing bytes are kept for the next call.
         """
-        buf = self._buf
-        buf.extend(data)
-        out: list[Any] = []
-        pos = 0
-        n = len(buf)
-        while pos < n:
-            if buf[pos] != STX_V2 and buf[pos] != STX_V1:
-                m = _STX_RE.search(buf, pos)
-                nxt = n if m is None else m.start()
-                self._mark_bad(nxt - pos)
-                pos = nxt
-                continue
-            status, msg, length = try_frame(self._mav, self._map, buf, pos)
-            if status == FRAME_OK:
-                out.append(msg)
-                self._in_bad = False
-                pos += length
-            elif status == FRAME_BAD:
-                self._mark_bad(1)
-                pos += 1
-            else:
-                break
-        if pos:
-            del buf[:pos]
-        self.good_frames += len(out)
-        return out
+        self._buf.extend(data)
+        return self._scan(end_of_stream=False)
 
     def flush(self) -> list[Any]:
         """End of stream: decode what the tail still holds, count the rest as bad.
@@ -198,6 +174,17 @@ class FrameParser:
         A false STX inside a bad region can claim a length that runs past the
         end of the data; :meth:`feed` waits for more bytes, here there are none,
         so scanning resumes one byte later and good frames behind it are kept.
+        """
+        out = self._scan(end_of_stream=True)
+        self._buf.clear()
+        return out
+
+    def _scan(self, end_of_stream: bool) -> list[Any]:
+        """Decode the good frames of the buffer, counting bad regions.
+
+        A frame whose length runs past the end of the buffer waits for more bytes,
+        unless the stream has ended: then it is a false STX, scanning resumes one
+        byte later.
         """
         buf = self._buf
         out: list[Any] = []
@@ -215,10 +202,13 @@ class FrameParser:
                 out.append(msg)
                 self._in_bad = False
                 pos += length
-            else:
+            elif status == FRAME_BAD or end_of_stream:
                 self._mark_bad(1)
                 pos += 1
-        buf.clear()
+            else:
+                break
+        if pos:
+            del buf[:pos]
         self.good_frames += len(out)
         return out
 

@@ -127,6 +127,16 @@ class Link(abc.ABC):
         """Release the transport; idempotent."""
         self._closed = True
 
+    async def _recv_queued(self, queue: asyncio.Queue[bytes | None]) -> bytes:
+        """Next chunk from a transport that queues what it receives (None: closed)."""
+        if self._closed:
+            raise LinkError(f"{self.url}: closed")
+        data = await queue.get()
+        if data is None:
+            raise LinkError(f"{self.url}: closed")
+        self.bytes_in += len(data)
+        return data
+
     def _send_failed(self, why: object) -> None:
         self.send_failures += 1
         n = self.send_failures
@@ -282,13 +292,7 @@ class UdpLink(Link):
         self._queue.put_nowait(data)
 
     async def recv(self) -> bytes:
-        if self._closed:
-            raise LinkError(f"{self.url}: closed")
-        data = await self._queue.get()
-        if data is None:
-            raise LinkError(f"{self.url}: closed")
-        self.bytes_in += len(data)
-        return data
+        return await self._recv_queued(self._queue)
 
     async def send(self, data: bytes) -> None:
         if self._transport is None or self._closed:
@@ -412,13 +416,7 @@ class TcpServerLink(Link):
             logger.info("%s: client %s left", self.url, peer)
 
     async def recv(self) -> bytes:
-        if self._closed:
-            raise LinkError(f"{self.url}: closed")
-        data = await self._queue.get()
-        if data is None:
-            raise LinkError(f"{self.url}: closed")
-        self.bytes_in += len(data)
-        return data
+        return await self._recv_queued(self._queue)
 
     async def send(self, data: bytes) -> None:
         if self._closed or not self._clients:
