@@ -146,6 +146,7 @@ _AUTOPILOT_FLAVOUR = {
 _RAD_PER_DEGE7 = 1.0 / units.DEGE7_PER_RAD
 _RAD_PER_CDEG = 1.0 / units.CDEG_PER_RAD
 _MPS2_PER_MG = 1.0 / units.MG_PER_MPS2
+_RADPS_PER_MRADPS = 1.0 / units.MRAD_PER_RAD
 _LAT_MAX_DEGE7 = 90 * 10_000_000
 _LON_MAX_DEGE7 = 180 * 10_000_000
 _LANDED_STATES = {int(s): s for s in LandedState}
@@ -696,7 +697,7 @@ class Decoder:
         imu_id = msg.id
         t_s = self._time_us(msg.time_usec, ("RAW_IMU", imu_id), t_rx_s)
         k = _MPS2_PER_MG
-        r = 1.0 / units.MRAD_PER_RAD
+        r = _RADPS_PER_MRADPS
         return self._imu(
             t_s, t_rx_s, msg.xacc * k, msg.yacc * k, msg.zacc * k,
             msg.xgyro * r, msg.ygyro * r, msg.zgyro * r, imu_id, "RAW_IMU",
@@ -707,7 +708,7 @@ class Decoder:
         imu_id = 0 if name == "SCALED_IMU" else (1 if name == "SCALED_IMU2" else 2)
         t_s = self._time_ms(msg.time_boot_ms, name, t_rx_s)
         k = _MPS2_PER_MG
-        r = 1.0 / units.MRAD_PER_RAD
+        r = _RADPS_PER_MRADPS
         return self._imu(
             t_s, t_rx_s, msg.xacc * k, msg.yacc * k, msg.zacc * k,
             msg.xgyro * r, msg.ygyro * r, msg.zgyro * r, imu_id, name,

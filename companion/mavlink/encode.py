@@ -59,6 +59,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
+import operator
 from dataclasses import dataclass
 from typing import Any
 
@@ -158,6 +159,37 @@ class EncoderConfig:
         load_dialect(self.dialect)
 
 
+STX_V2 = 0xFD
+
+
+def _pack_plan(mod: Any, cls: type) -> Any:
+    """``(field getter, payload packer, id, id bytes, CRC_EXTRA byte)`` for a message class
+    :meth:`Encoder.pack` packs itself, or False (arrays, strings, MAVLink 1 or no fast CRC:
+    pymavlink packs those)."""
+    try:
+        fields = list(cls.ordered_fieldnames)  # type: ignore[attr-defined]
+        lengths = list(cls.lengths)  # type: ignore[attr-defined]
+        fmt = cls.unpacker.format  # type: ignore[attr-defined]
+        msg_id = int(cls.id)  # type: ignore[attr-defined]
+        extra = bytes((int(cls.crc_extra),))  # type: ignore[attr-defined]
+    except (AttributeError, TypeError, ValueError):
+        return False
+    fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    if (
+        getattr(mod, "mcrf4xx", None) is None
+        or float(mod.WIRE_PROTOCOL_VERSION) != 2.0
+        or sum(lengths) != len(lengths)
+        or "s" in fmt
+        or "c" in fmt
+        or not fields
+    ):
+        return False
+    get = operator.attrgetter(*fields)
+    getter = get if len(fields) > 1 else (lambda m, _g=get: (_g(m),))
+    id_bytes = bytes((msg_id & 0xFF, (msg_id >> 8) & 0xFF, msg_id >> 16))
+    return getter, cls.unpacker.pack, msg_id, id_bytes, extra  # type: ignore[attr-defined]
+
+
 def _clamp_int(v: float, lo: int, hi: int) -> int:
     return lo if v < lo else hi if v > hi else int(round(v))
 
@@ -230,6 +262,8 @@ class Encoder:
         }
         self.suppressed: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
+        self._pack_plans: dict[type, Any] = {}
+        self._crc: Any = getattr(self._mod, "mcrf4xx", None)
 
     @property
     def system_id(self) -> int:
@@ -294,9 +328,33 @@ class Encoder:
         )
 
     def pack(self, msg: Any) -> bytes:
-        """Serialise ``msg`` with our system id, component 191 and the next sequence number."""
+        """Serialise ``msg`` with our system id, component 191 and the next sequence number.
+
+        Messages without arrays or strings are packed here with the message class's own
+        struct, the MAVLink 2 trailing-zero truncation and CRC_EXTRA, byte for byte what
+        pymavlink's ``msg.pack`` gives (and the same ``_msgbuf``, ``_payload``, ``_crc``
+        and ``_header`` are left on the message); anything else goes to pymavlink.
+        """
         mav = self._mav
-        data = bytes(msg.pack(mav))
+        plan = self._pack_plans.get(type(msg))
+        if plan is None:
+            plan = self._pack_plans[type(msg)] = _pack_plan(self._mod, type(msg))
+        if plan is False or mav.signing.sign_outgoing:
+            data = bytes(msg.pack(mav))
+        else:
+            get, pack_payload, msg_id, id_bytes, extra = plan
+            payload = pack_payload(*get(msg))
+            stripped = payload.rstrip(b"\x00") or payload[:1]
+            head = bytes((STX_V2, len(stripped), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent))
+            buf = head + id_bytes + stripped
+            crc = self._crc(extra, self._crc(buf[1:], 0xFFFF))
+            data = buf + crc.to_bytes(2, "little")
+            msg._payload = stripped
+            msg._header = self._mod.MAVLink_header(
+                msg_id, 0, 0, len(stripped), mav.seq, mav.srcSystem, mav.srcComponent
+            )
+            msg._msgbuf = bytearray(data)
+            msg._crc = crc
         mav.seq = (mav.seq + 1) % 256
         return data
 

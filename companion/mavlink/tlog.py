@@ -37,6 +37,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
 
+from companion.mavlink.fastdecode import FastDecoder
 from companion.mavlink.frames import (
     FRAME_BAD,
     FRAME_NEED_MORE,
@@ -125,6 +126,7 @@ class TlogReader:
             return
         mav = self._mod.MAVLink(None)
         mmap_ = self._mod.mavlink_map
+        fast = FastDecoder(self._mod)
         stats = self.stats
         buf = bytearray()
         last_us: int | None = None
@@ -152,7 +154,7 @@ class TlogReader:
                     p = pos + TIMESTAMP_LEN
                     c = buf[p]
                     if c == STX_V2 or c == STX_V1:
-                        status, msg, length = try_frame(mav, mmap_, buf, p)
+                        status, msg, length = try_frame(mav, mmap_, buf, p, fast)
                     else:
                         status, msg, length = FRAME_BAD, None, 0
                     if status == FRAME_NEED_MORE:
@@ -278,8 +280,7 @@ class TlogWriter:
             if not data:
                 data = msg_or_bytes.pack(self._mav)
                 self._mav.seq = (self._mav.seq + 1) % 256
-        self._fh.write(_TS.pack(int(round(t_s * US_PER_S))))
-        self._fh.write(data)
+        self._fh.write(_TS.pack(int(round(t_s * US_PER_S))) + data)
         self.records += 1
 
     def flush(self) -> None:

@@ -100,13 +100,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from companion.nav import ins
-from companion.nav.frames import LocalFrame, euler_to_quat, quat_to_euler, skew, wrap_pi
+from companion.nav.frames import LocalFrame, quat_to_euler, skew, wrap_pi
 from companion.nav.kalman import (
     Correction,
     InnovationWindow,
     chi2_gate,
     discretise_second_order,
-    joseph_update,
+    joseph_update_diag_r,
     predict_covariance,
     van_loan,
 )
@@ -349,8 +349,11 @@ class BlendNavigator:
         h_fl, v_fl = cfg.pos_std_floor_m
         self._pos_floor_t = (h_fl**2, h_fl**2, v_fl**2)
         self._pos_floor = np.array(self._pos_floor_t)
-        self._h_cache: dict[tuple[bool, ...], tuple[FloatArray, FloatArray]] = {}
+        self._h_cache: dict[tuple[bool, ...], tuple[FloatArray, FloatArray, FloatArray]] = {}
         self._gm = cfg.gnss_error_model == "gauss_markov"
+        self._max_imu_gap_s = cfg.max_imu_gap_s
+        self._cov_interval_s = cfg.cov_interval_s
+        self._gqg_static = self._static_gqg()
         self._f_template = np.zeros((N_STATE, N_STATE))
         self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
             np.zeros(3),
@@ -392,16 +395,14 @@ class BlendNavigator:
 
     def on_imu(self, sample: ImuSample) -> None:
         """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
-        acc = sample.acc_b_mps2.tolist()
-        gyro = sample.gyro_b_radps.tolist()
-        if len(acc) != 3 or len(gyro) != 3:
+        acc_t = tuple(sample.acc_b_mps2.tolist())
+        gyro_t = tuple(sample.gyro_b_radps.tolist())
+        if len(acc_t) != 3 or len(gyro_t) != 3:
             self._reject("imu_bad_shape")
             return
-        if not math.isfinite(sum(acc) + sum(gyro)):  # any NaN or inf makes the sum non-finite
+        if not math.isfinite(sum(acc_t) + sum(gyro_t)):  # NaN or inf makes the sum non-finite
             self._reject("imu_not_finite")
             return
-        acc_t = (acc[0], acc[1], acc[2])
-        gyro_t = (gyro[0], gyro[1], gyro[2])
         mech = self._mech
         if not self._init:
             if self._pre_imu and sample.t_s <= self._pre_imu[-1][0]:
@@ -420,10 +421,10 @@ class BlendNavigator:
         if dt <= 0.0:
             self._reject("imu_time_not_increasing")
             return
-        if dt > self.config.max_imu_gap_s:
+        if dt > self._max_imu_gap_s:
             self._reject("imu_gap")
-        mech.step(sample.t_s, acc_t, gyro_t)
-        if mech.seg_dt_s >= self.config.cov_interval_s:
+        mech.step(sample.t_s, acc_t, gyro_t)  # type: ignore[arg-type]
+        if mech.seg_dt_s >= self._cov_interval_s:
             self._close_segment()
 
     def reset_heading(self, yaw_sigma_rad: float) -> None:
@@ -473,8 +474,9 @@ class BlendNavigator:
         if not all(math.isfinite(v) for v in vals):
             self._reject("attitude_not_finite")
             return
-        q = euler_to_quat(sample.roll_rad, sample.pitch_rad, sample.yaw_rad - yaw_correction_rad)
-        self._att_q = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+        self._att_q = _euler_to_quat(
+            sample.roll_rad, sample.pitch_rad, sample.yaw_rad - yaw_correction_rad
+        )
         self._att_t_s = sample.t_s
         if self._init and not self._strapdown:
             mech = self._mech
@@ -484,7 +486,7 @@ class BlendNavigator:
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
         """Gate and fuse one fix at its own time; carry the correction to the newest IMU time."""
         cfg = self.config
-        if not (np.all(np.isfinite(meas.pos_ned_m)) and math.isfinite(meas.t_s)):
+        if not (all(map(math.isfinite, meas.pos_ned_m.tolist())) and math.isfinite(meas.t_s)):
             return self._refuse(meas, "position_not_finite")
         r_pos_rep, r_vel_rep = self._reported_variances(meas)
         if not self._init:
@@ -498,10 +500,12 @@ class BlendNavigator:
             return self._refuse(meas, "fix_out_of_order")
 
         scale = self._r_scale()
-        self._gnss_error_block(meas.fix_type, r_pos_rep * scale[:3])
+        r_pos_scaled = r_pos_rep * scale[:3]
+        self._gnss_error_block(meas.fix_type, r_pos_scaled)
         idx, pos_m, vel_m, q_m = self._state_at(meas.t_s)
-        p_m = self._hist[idx].p_mat
-        dt_p = meas.t_s - self._hist[idx].t_s
+        snap = self._hist[idx]
+        p_m = snap.p_mat
+        dt_p = meas.t_s - snap.t_s
         if dt_p > 0.0:
             # the snapshot's covariance is up to cov_interval_s older than the fix: carry it
             # (negligible in steady flight, not while the velocity is uncertain: after the
@@ -512,11 +516,10 @@ class BlendNavigator:
         if self._gm:  # the white part of the position noise; the rest is in states 15:18
             r_rep[:3] = self._white_part(r_pos_rep)
         r_diag = r_rep * scale[rows]
-        r_mat = np.diag(r_diag)
         dof = len(rows)
         threshold = self._gates[dof]
         try:
-            corr = joseph_update(p_m, y, h_mat, r_mat)
+            corr = joseph_update_diag_r(p_m, y, h_mat, r_diag)
         except ValueError:
             return self._refuse(meas, "innovation_cov_not_pd")
         innov_pos = -y[:3]
@@ -530,14 +533,15 @@ class BlendNavigator:
 
         if cfg.adaptive:
             self._adapt(y, h_mat, r_rep, p_m, corr, meas.t_s)
-        self.diag.r_used = np.full(6, np.nan)
-        self.diag.r_used[rows] = r_diag
-        self.diag.r_used[:3] = r_pos_rep * scale[:3]
+        r_used = np.full(6, np.nan)
+        r_used[rows] = r_diag
+        r_used[:3] = r_pos_scaled
+        self.diag.r_used = r_used
         # the correction is for the fix time; injected at the snapshot, its position part
         # moves with its velocity part over the time between them (a 2 m/s correction
         # 0.05 s away would otherwise plant 0.1 m of position error)
         dx = corr.dx.copy()
-        dx[0:3] += (self._hist[idx].t_s - meas.t_s) * dx[3:6]
+        dx[0:3] += (snap.t_s - meas.t_s) * dx[3:6]
         self._apply(idx, dx, corr.p_post)
         self._last_fuse_t_s = meas.t_s
         self.diag.fused += 1
@@ -548,28 +552,39 @@ class BlendNavigator:
         if not self._init:
             return None
         mech = self._mech
-        pos, vel = mech.state_vectors()
         dt = max(0.0, t_s - mech.t_s)
         # covariance at the newest IMU time: the last propagated P plus the open segment
         dt_p = max(0.0, t_s - self._hist[-1].t_s)
         p = self._p
-        q_acc = np.diag(self.diag.accel_psd_ned)
-        p_pos = (
-            p[0:3, 0:3]
-            + dt_p * (p[0:3, 3:6] + p[3:6, 0:3])
-            + dt_p**2 * p[3:6, 3:6]
-            + q_acc * dt_p**3 / 3.0
-        )
-        p_vel = p[3:6, 3:6] + q_acc * dt_p
-        q_nb = np.array(mech.q_nb)
-        _, _, yaw = quat_to_euler(q_nb)
+        psd = self.diag.accel_psd_ned
+        pvv = p[3:6, 3:6]
+        p_pos = p[0:3, 3:6] + p[3:6, 0:3]
+        p_pos *= dt_p
+        p_pos += p[0:3, 0:3]
+        p_pos += dt_p**2 * pvv
+        p_vel = pvv.copy()
+        # the white acceleration noise, on the diagonals (views of the (3, 3) arrays)
+        p_pos.reshape(-1)[::4] += psd * dt_p**3 / 3.0
+        p_vel.reshape(-1)[::4] += psd * dt_p
+        w, x, y, z = mech.q_nb
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        vn, ve, vd = mech.vel
+        pn, pe, pd = mech.pos
         if dt > 0.0:
             # carry the heading with the latest body rate (turns at 10 deg/s move it
-            # 0.2 deg in one 50 Hz IMU period)
-            rate_b = np.array(mech.last_gyro_b_radps) - np.array(mech.bg)
-            yaw_rate = float((ins.quat_to_mat(mech.q_nb) @ rate_b)[2])
+            # 0.2 deg in one 50 Hz IMU period): the down row of mat_nb times the rate
+            g = mech.last_gyro_b_radps
+            bg = mech.bg
+            yaw_rate = (
+                2 * (x * z - w * y) * (g[0] - bg[0])
+                + 2 * (y * z + w * x) * (g[1] - bg[1])
+                + (1 - 2 * (x * x + y * y)) * (g[2] - bg[2])
+            )
             yaw = wrap_pi(yaw + yaw_rate * dt)
-        return NavState(t_s, pos + vel * dt, vel, 0.5 * (p_pos + p_pos.T), p_vel, yaw)
+        pos = np.array((pn + vn * dt, pe + ve * dt, pd + vd * dt))
+        p_sym = p_pos + p_pos.T
+        p_sym *= 0.5
+        return NavState(t_s, pos, np.array((vn, ve, vd)), p_sym, p_vel, yaw)
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express the state in ``new`` (position through geodetic, vectors rotated)."""
@@ -643,11 +658,10 @@ class BlendNavigator:
             meas.t_s, False, math.nan, 0, math.nan, nan3, np.full((3, 3), np.nan), reason
         )
 
-    def _make_gqg(self) -> FloatArray:
-        """Diagonal (15,) of the continuous noise intensity G Qc G^T with the current accel PSD."""
+    def _static_gqg(self) -> FloatArray:
+        """The configuration's part of :meth:`_make_gqg` (attitude and bias noises), (18,)."""
         cfg = self.config
         g = np.zeros(N_STATE)
-        g[3:6] = self.diag.accel_psd_ned
         if self._strapdown:
             g[6:9] = cfg.gyro_arw_rad_rts**2
         else:
@@ -655,6 +669,13 @@ class BlendNavigator:
             g[6:9] = 2.0 * sig**2 / cfg.att_err_tau_s
         g[9:12] = _gm_psd(cfg.accel_bias_sigma_mps2, cfg.accel_bias_tau_s)
         g[12:15] = _gm_psd(cfg.gyro_bias_sigma_radps, cfg.gyro_bias_tau_s)
+        return g
+
+    def _make_gqg(self) -> FloatArray:
+        """Diagonal (18,) of the continuous noise intensity G Qc G^T with the current accel
+        PSD and receiver-error block."""
+        g = self._gqg_static.copy()
+        g[3:6] = self.diag.accel_psd_ned
         if self._gm and self._gb_fix is not None:
             g[IGB : IGB + 3] = 2.0 * self._gb_var / self._gb_tau
         return g
@@ -717,8 +738,11 @@ class BlendNavigator:
         h10 = u**3 - 2 * u**2 + u
         h01 = -2 * u**3 + 3 * u**2
         h11 = u**3 - u**2
-        pos = h00 * s0.pos + h10 * h * s0.vel + h01 * s1_pos + h11 * h * s1_vel
-        vel = (1.0 - u) * s0.vel + u * s1_vel
+        a, b, c, d = h00, h10 * h, h01, h11 * h
+        p0, v0, p1, v1 = s0.pos.tolist(), s0.vel.tolist(), s1_pos.tolist(), s1_vel.tolist()
+        pos = np.array([a * p0[i] + b * v0[i] + c * p1[i] + d * v1[i] for i in range(3)])
+        w0 = 1.0 - u
+        vel = np.array([w0 * v0[i] + u * v1[i] for i in range(3)])
         if u >= 0.5 and j + 1 < n:
             return j + 1, pos, vel, s1_q
         return j, pos, vel, (s0.q_nb if u < 0.5 else s1_q)
@@ -795,9 +819,9 @@ class BlendNavigator:
             for k, axis in enumerate(np.flatnonzero(vel_ok)):
                 h_c[3 + k, ins.IV + axis] = 1.0
             h_c.flags.writeable = False  # shared between fixes
-            cached = (rows_c, h_c)
+            cached = (rows_c, h_c, rows_c[3:] - 3)
             self._h_cache[key] = cached
-        rows, h_mat = cached
+        rows, h_mat, axes = cached
         m = len(rows)
         pos_ant = pos
         vel_ant = vel
@@ -812,7 +836,6 @@ class BlendNavigator:
         y[0:3] = pos_ant + self._gb - meas.pos_ned_m
         r_rep = np.empty(m)
         r_rep[0:3] = r_pos
-        axes = rows[3:] - 3
         y[3:] = vel_ant[axes] - vel_z[axes]
         r_rep[3:] = r_vel[axes]
         return rows, y, h_mat, r_rep
@@ -820,13 +843,15 @@ class BlendNavigator:
     def _r_scale(self) -> FloatArray:
         """Adaptive variance scale per component (ones when not adaptive or not ready)."""
         cfg = self.config
-        scale = np.ones(6)
         if not cfg.adaptive:
-            return scale
+            return np.ones(6)
         lo, hi = cfg.r_scale_bounds
-        for i in range(3):
-            if self._r_win.count(i) >= cfg.adaptive_min_epochs:
-                scale[i] = min(max(self._r_win.mean(i), lo), hi)
+        win = self._r_win
+        min_epochs = cfg.adaptive_min_epochs
+        values = [
+            min(max(win.mean(i), lo), hi) if win.count(i) >= min_epochs else 1.0 for i in range(3)
+        ]
+        scale = np.array(values + [1.0, 1.0, 1.0])
         self.diag.r_scale = scale
         return scale
 
@@ -846,37 +871,45 @@ class BlendNavigator:
         """
         cfg = self.config
         dx, p_post = corr.dx, corr.p_post
-        resid = y[:3] - h_mat[:3] @ dx
+        h3 = h_mat[:3]
+        resid = (y[:3] - h3 @ dx).tolist()
         if self._has_lever or self._gm:
-            h3 = h_mat[:3]
-            hph = np.sum((h3 @ p_post) * h3, axis=1)
+            hph = ((h3 @ p_post) * h3).sum(axis=1).tolist()
         else:
-            hph = p_post.diagonal()[:3]
+            hph = p_post.diagonal()[:3].tolist()
+        r3 = r_rep[:3].tolist()
+        r_add = self._r_win.add
         for k in range(3):  # position rows come first
-            self._r_win.add(k, (float(resid[k]) ** 2 + float(hph[k])) / float(r_rep[k]))
+            r_add(k, (resid[k] ** 2 + hph[k]) / r3[k])
         # Q: velocity block of K (eta eta^T - S) K^T per unit time, added to the PSD in use
         if not (math.isfinite(self._last_fuse_t_s) and t_s > self._last_fuse_t_s):
             return
         dt = t_s - self._last_fuse_t_s
-        dp = (p_prior.diagonal() - p_post.diagonal())[3:6].tolist()
+        dp = (p_prior.diagonal()[3:6] - p_post.diagonal()[3:6]).tolist()
         dxv = dx[3:6].tolist()
         # an unmodelled noise dQ shows in dx_v only through the part of the velocity error
         # the update removes, (K H)_vv: the raw K (eta eta^T - S) K^T sees dQ (K H)_vv^2
         # (worst on the down axis, which GPS_RAW_INT observes through position only);
         # dividing by it makes the increment unbiased. Floored: an axis the fix barely
         # observes cannot say much about its noise.
-        kh = np.einsum("ij,ji->i", corr.gain[3:6], h_mat[:, 3:6])
-        kh2 = np.maximum(kh, _KH_FLOOR) ** 2
-        psd = self.diag.accel_psd_ned
+        kh = (corr.gain[3:6] * h_mat[:, 3:6].T).sum(axis=1).tolist()
+        psd = self.diag.accel_psd_ned.tolist()
         lo, hi = cfg.q_scale_bounds
         q0 = self._accel_psd0
-        new = psd.copy()
+        q_lo, q_hi = lo * q0, hi * q0
+        min_epochs = cfg.adaptive_min_epochs
+        q_win = self._q_win
+        new = list(psd)
+        changed = False
         for i in range(3):
-            self._q_win.add(i, float(psd[i]) + (dxv[i] ** 2 - dp[i]) / (dt * float(kh2[i])))
-            if self._q_win.count(i) >= cfg.adaptive_min_epochs:
-                new[i] = min(max(self._q_win.mean(i), lo * q0), hi * q0)
-        if np.any(np.abs(new - psd) > 1e-3 * psd):
-            self.diag.accel_psd_ned = new
+            kh2 = max(kh[i], _KH_FLOOR) ** 2
+            q_win.add(i, psd[i] + (dxv[i] ** 2 - dp[i]) / (dt * kh2))
+            if q_win.count(i) >= min_epochs:
+                new[i] = min(max(q_win.mean(i), q_lo), q_hi)
+                if abs(new[i] - psd[i]) > 1e-3 * psd[i]:
+                    changed = True
+        if changed:
+            self.diag.accel_psd_ned = np.array(new)
             self._gqg = self._make_gqg()
 
     def _apply(self, idx: int, dx: FloatArray, p_post: FloatArray) -> None:
@@ -900,7 +933,9 @@ class BlendNavigator:
         dt_open = mech.seg_dt_s
         if dt_open > 0.0:
             f_ned = np.array(mech.seg_fn_sum) / dt_open
-            dx = dx + dt_open * (self._f_mat(f_ned, ins.quat_to_mat(mech.q_nb)) @ dx)
+            f_dx = self._f_mat(f_ned, ins.quat_to_mat(mech.q_nb)) @ dx
+            f_dx *= dt_open
+            dx = dx + f_dx
         mech.inject(dx)
         self._inject_attitude_corr(dx)
         if self._gm:
@@ -972,6 +1007,19 @@ class BlendNavigator:
         return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")
 
 
+def _euler_to_quat(roll_rad: float, pitch_rad: float, yaw_rad: float) -> ins.Quat:
+    """:func:`companion.nav.frames.euler_to_quat` as a tuple of floats (the same formula)."""
+    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
+    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
+    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
 def _gm_psd(sigma: float, tau_s: float) -> float:
     """White-noise PSD driving a first-order Gauss-Markov process of steady-state ``sigma``.
 
@@ -1020,13 +1068,17 @@ def _carry_pos_vel(p: FloatArray, dt_s: float, accel_psd_ned: FloatArray) -> Flo
     """Covariance carried ``dt_s`` forward through ``position += velocity * dt`` with white
     acceleration noise of PSD ``accel_psd_ned`` [m^2/s^3]: the dominant coupling over a
     fraction of a covariance interval. ``p`` is (N_STATE, N_STATE)."""
-    n = p.shape[0]
-    phi = np.eye(n)
-    phi[0:3, 3:6] = np.eye(3) * dt_s
-    q_acc = np.diag(accel_psd_ned)
-    carried = phi @ p @ phi.T
-    carried[0:3, 0:3] += q_acc * dt_s**3 / 3.0
-    carried[0:3, 3:6] += q_acc * dt_s**2 / 2.0
-    carried[3:6, 0:3] += q_acc * dt_s**2 / 2.0
-    carried[3:6, 3:6] += q_acc * dt_s
+    carried = p.copy()
+    carried[0:3, :] += dt_s * p[3:6, :]  # Phi P: position rows gain dt x velocity rows
+    carried[:, 0:3] += dt_s * carried[:, 3:6]  # (Phi P) Phi^T: the same for the columns
+    # the white acceleration noise on the diagonals of the four 3x3 blocks (flat views)
+    n = carried.shape[0]
+    flat = carried.reshape(-1)
+    step = n + 1
+    q_vv = accel_psd_ned * dt_s
+    q_pv = accel_psd_ned * dt_s**2 / 2.0
+    flat[0 : 3 * step : step] += accel_psd_ned * dt_s**3 / 3.0
+    flat[3 : 3 + 3 * step : step] += q_pv
+    flat[3 * n : 3 * n + 3 * step : step] += q_pv
+    flat[3 * step : 6 * step : step] += q_vv
     return carried

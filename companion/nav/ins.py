@@ -315,12 +315,16 @@ class Mechanisation:
 
     def inject(self, dx: FloatArray) -> None:
         """Apply an error-state correction (estimate minus truth convention), shape (15,)."""
+        d = dx.tolist()
+        pos, vel, ba, bg = self.pos, self.vel, self.ba, self.bg
         for i in range(3):
-            self.pos[i] -= float(dx[IP + i])
-            self.vel[i] -= float(dx[IV + i])
-            self.ba[i] -= float(dx[IBA + i])
-            self.bg[i] -= float(dx[IBG + i])
-        self.q_nb = rotate_by_psi(self.q_nb, dx[IA : IA + 3])
+            pos[i] -= d[IP + i]
+            vel[i] -= d[IV + i]
+            ba[i] -= d[IBA + i]
+            bg[i] -= d[IBG + i]
+        self.q_nb = quat_normalise(
+            quat_mul(quat_from_rotvec(d[IA], d[IA + 1], d[IA + 2]), self.q_nb)
+        )
 
     def state_vectors(self) -> tuple[FloatArray, FloatArray]:
         """Position and velocity as arrays, shape (3,) each."""
@@ -329,8 +333,8 @@ class Mechanisation:
 
 def rotate_by_psi(q_nb: Quat, psi_ned_rad: FloatArray) -> Quat:
     """Remove an attitude error ``psi``: C = (I + [psi x]) C_hat, as quaternions."""
-    dq = quat_from_rotvec(float(psi_ned_rad[0]), float(psi_ned_rad[1]), float(psi_ned_rad[2]))
-    return quat_normalise(quat_mul(dq, q_nb))
+    rx, ry, rz = np.asarray(psi_ned_rad, dtype=float).tolist()
+    return quat_normalise(quat_mul(quat_from_rotvec(rx, ry, rz), q_nb))
 
 
 def error_model_f(

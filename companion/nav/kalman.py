@@ -25,6 +25,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import lapack
 from scipy.stats import chi2
 
 from companion.types import FloatArray
@@ -84,10 +85,13 @@ def discretise_second_order(
     """
     if dt_s <= 0.0:
         raise ValueError(f"dt_s must be > 0, got {dt_s}")
+    n = f_mat.shape[0]
     fdt = f_mat * dt_s
-    phi = np.eye(f_mat.shape[0]) + fdt + 0.5 * (fdt @ fdt)
+    phi = _eye(n) + fdt
+    phi += 0.5 * (fdt @ fdt)
     qd = (phi * gqg_diag) @ phi.T
-    qd[np.diag_indices_from(qd)] += gqg_diag
+    diag = qd.reshape(-1)[:: n + 1]  # a view of the diagonal
+    diag += gqg_diag
     qd *= 0.5 * dt_s
     return phi, qd
 
@@ -123,8 +127,9 @@ def expm_taylor(a_mat: FloatArray, order: int = 10) -> FloatArray:
 
 def predict_covariance(p_mat: FloatArray, phi: FloatArray, qd: FloatArray) -> FloatArray:
     """Covariance prediction ``Phi P Phi^T + Qd``, symmetrised, shape (n, n)."""
-    p_new = phi @ p_mat @ phi.T + qd
-    return 0.5 * (p_new + p_new.T)
+    p_new = phi @ p_mat @ phi.T
+    p_new += qd
+    return _symmetrised(p_new)
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,20 +190,80 @@ def joseph_update(
     ----------
     SEEDS.md S1 (the blend's K, update equations); Joseph form: Bucy & Joseph (1968).
     """
+    return _joseph(p_mat, nu, h_mat, r_mat, None)
+
+
+def joseph_update_diag_r(
+    p_mat: FloatArray, nu: FloatArray, h_mat: FloatArray, r_diag: FloatArray
+) -> Correction:
+    """:func:`joseph_update` for a diagonal R given by its diagonal ``r_diag`` (m,).
+
+    The same Joseph form; ``K R K^T`` is formed as ``(K * r) K^T`` (the zero
+    off-diagonal products of a full R add nothing).
+    """
+    return _joseph(p_mat, nu, h_mat, None, r_diag)
+
+
+def _joseph(
+    p_mat: FloatArray,
+    nu: FloatArray,
+    h_mat: FloatArray,
+    r_mat: FloatArray | None,
+    r_diag: FloatArray | None,
+) -> Correction:
+    """Shared body of the Joseph-form updates (exactly one of ``r_mat``, ``r_diag``)."""
     pht = p_mat @ h_mat.T
-    s_mat = h_mat @ pht + r_mat
-    s_mat = 0.5 * (s_mat + s_mat.T)
-    try:
-        chol = np.linalg.cholesky(s_mat)
-    except np.linalg.LinAlgError as exc:
-        raise ValueError("innovation covariance is not positive definite") from exc
+    s_mat = h_mat @ pht
+    if r_diag is not None:
+        m = s_mat.shape[0]
+        s_diag = s_mat.reshape(-1)[:: m + 1]
+        s_diag += r_diag
+    elif r_mat is not None:
+        s_mat += r_mat
+    else:
+        raise ValueError("a measurement noise covariance is needed")
+    s_mat = _symmetrised(s_mat)
+    # LAPACK directly (dpotrf, dtrtri): numpy.linalg's wrappers cost several times the
+    # factorisation of a matrix this small
+    chol, info = _dpotrf(s_mat, lower=1, clean=1)
+    if info != 0:
+        raise ValueError("innovation covariance is not positive definite")
     # S^-1 = L^-T L^-1: one small triangular inverse serves the gain, the NIS and nu_std
-    linv = np.linalg.inv(chol)
+    linv, info = _dtrtri(chol, lower=1)
+    if info != 0:
+        raise ValueError("innovation covariance is not positive definite")
     std = linv @ nu
     gain = pht @ (linv.T @ linv)
-    ikh = np.eye(p_mat.shape[0]) - gain @ h_mat
-    p_post = ikh @ p_mat @ ikh.T + gain @ r_mat @ gain.T
-    return Correction(gain @ nu, 0.5 * (p_post + p_post.T), gain, s_mat, float(std @ std), std)
+    ikh = _eye(p_mat.shape[0]) - gain @ h_mat
+    p_post = ikh @ p_mat @ ikh.T
+    if r_diag is not None:
+        p_post += (gain * r_diag) @ gain.T
+    elif r_mat is not None:
+        p_post += gain @ r_mat @ gain.T
+    return Correction(gain @ nu, _symmetrised(p_post), gain, s_mat, float(std @ std), std)
+
+
+_dpotrf = lapack.dpotrf
+_dtrtri = lapack.dtrtri
+
+_EYES: dict[int, FloatArray] = {}
+
+
+def _eye(n: int) -> FloatArray:
+    """A shared, read-only identity (n, n) (building one per call costs more than using it)."""
+    eye = _EYES.get(n)
+    if eye is None:
+        eye = np.eye(n)
+        eye.flags.writeable = False
+        _EYES[n] = eye
+    return eye
+
+
+def _symmetrised(a_mat: FloatArray) -> FloatArray:
+    """``0.5 (A + A^T)``, a new array (A is left as it was)."""
+    sym = a_mat + a_mat.T
+    sym *= 0.5
+    return sym
 
 
 def chi2_gate(false_alarm_prob: float, dof: int) -> float:

@@ -19,6 +19,7 @@ Navigation (2001), section 6.2 (continuous white-noise acceleration model).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,6 +71,8 @@ class PassthroughNavigator:
         self._vel = np.zeros(3)
         self._p_pos = _EYE3.copy()
         self._p_vel = _EYE3.copy()
+        self._diagonal = True
+        """Both covariances are diagonal (as every fix leaves them; a frame shift rotates them)."""
 
     @property
     def initialised(self) -> bool:
@@ -90,51 +93,71 @@ class PassthroughNavigator:
         if self._t_s is None:
             return None
         dt = max(0.0, t_s - self._t_s)
-        q = self.config.accel_psd_m2ps3
-        p_pos = self._p_pos + dt * dt * self._p_vel + (q * dt**3 / 3.0) * _EYE3
-        p_vel = self._p_vel + (q * dt) * _EYE3
+        p_pos, p_vel = self._grown_cov(dt)
         return NavState(t_s, self._pos + self._vel * dt, self._vel.copy(), p_pos, p_vel)
+
+    def _grown_cov(self, dt: float) -> tuple[FloatArray, FloatArray]:
+        """Position and velocity covariances (3, 3) each, ``dt`` s after the last fix."""
+        q = self.config.accel_psd_m2ps3
+        p_pos = self._p_vel * (dt * dt)
+        p_pos += self._p_pos
+        p_vel = self._p_vel.copy()
+        # the white acceleration noise q I, added to the diagonals (views)
+        p_pos.reshape(-1)[::4] += q * dt**3 / 3.0
+        p_vel.reshape(-1)[::4] += q * dt
+        return p_pos, p_vel
 
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
         """Gate the fix against the extrapolation, then take it as the new state."""
-        r_pos = np.diag(meas.pos_var_ned_m2)
+        pos_var = meas.pos_var_ned_m2.tolist()
         if self._t_s is None:
-            self._take(meas, None)
-            return GnssUpdate(meas.t_s, True, 0.0, 3, self._gate, np.zeros(3), r_pos)
-        pred = self.predict(meas.t_s)
-        if pred is None:  # cannot happen once initialised; keeps mypy honest
-            raise ValueError("predict returned None on an initialised navigator")
-        innov = meas.pos_ned_m - pred.pos_ned_m
-        s_cov = pred.pos_cov_ned_m2 + r_pos
-        nis = float(innov @ np.linalg.solve(s_cov, innov))
+            self._take(meas, pos_var, False)
+            return GnssUpdate(meas.t_s, True, 0.0, 3, self._gate, np.zeros(3), np.diag(pos_var))
+        dt = max(0.0, meas.t_s - self._t_s)
+        s_cov, _ = self._grown_cov(dt)
+        s_cov.reshape(-1)[::4] += meas.pos_var_ned_m2
+        innov = meas.pos_ned_m - (self._pos + self._vel * dt)
+        if self._diagonal:
+            # S is diagonal: S^-1 nu is nu_i / S_ii
+            n0, n1, n2 = innov.tolist()
+            nis = n0 * n0 / s_cov[0, 0] + n1 * n1 / s_cov[1, 1] + n2 * n2 / s_cov[2, 2]
+        else:
+            nis = float(innov @ np.linalg.solve(s_cov, innov))
         if gate and nis > self._gate:
             return GnssUpdate(meas.t_s, False, nis, 3, self._gate, innov, s_cov, "gate")
-        self._take(meas, pred)
+        self._take(meas, pos_var, True)
         return GnssUpdate(meas.t_s, True, nis, 3, self._gate, innov, s_cov)
 
-    def _take(self, meas: GnssMeasurement, pred: NavState | None) -> None:
+    def _take(self, meas: GnssMeasurement, pos_var: list[float], predicted: bool) -> None:
         cfg = self.config
-        vel = np.array(meas.vel_ned_mps, dtype=float)
-        vel_var = np.array(meas.vel_var_ned_m2ps2, dtype=float)
-        vel_var = np.where(np.isfinite(vel_var), vel_var, cfg.default_vel_var_m2ps2)
-        if pred is not None and self._t_s is not None and meas.t_s > self._t_s:
+        isfinite = math.isfinite
+        vel = [float(v) for v in meas.vel_ned_mps]
+        default_var = cfg.default_vel_var_m2ps2
+        vel_var = [
+            v if isfinite(v) else default_var for v in (float(v) for v in meas.vel_var_ned_m2ps2)
+        ]
+        if predicted and self._t_s is not None and meas.t_s > self._t_s:
             dt = meas.t_s - self._t_s
-            diff_vel = (meas.pos_ned_m - self._pos) / dt
+            pos = meas.pos_ned_m.tolist()
+            old_pos = self._pos.tolist()
+            old_vel = self._vel.tolist()
             k = cfg.vertical_velocity_gain
             for axis in range(3):
-                if not np.isfinite(vel[axis]):
-                    vel[axis] = (1.0 - k) * self._vel[axis] + k * diff_vel[axis]
+                if not isfinite(vel[axis]):
+                    diff_vel = (pos[axis] - old_pos[axis]) / dt
+                    vel[axis] = (1.0 - k) * old_vel[axis] + k * diff_vel
                     # EWMA of height differences: v = (1-k) v + k d, var(d) = 2 sigma^2 / dt^2
-                    vel_var[axis] = (1.0 - k) ** 2 * self._p_vel[axis, axis] + (
-                        k**2 * 2.0 * meas.pos_var_ned_m2[axis] / dt**2
+                    vel_var[axis] = (1.0 - k) ** 2 * float(self._p_vel[axis, axis]) + (
+                        k**2 * 2.0 * pos_var[axis] / dt**2
                     )
         else:
-            vel = np.where(np.isfinite(vel), vel, 0.0)
+            vel = [v if isfinite(v) else 0.0 for v in vel]
         self._t_s = meas.t_s
         self._pos = np.array(meas.pos_ned_m, dtype=float)
-        self._vel = vel
-        self._p_pos = np.diag(meas.pos_var_ned_m2)
+        self._vel = np.array(vel)
+        self._p_pos = np.diag(pos_var)
         self._p_vel = np.diag(vel_var)
+        self._diagonal = True
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express position, velocity and covariances in ``new``."""
@@ -146,6 +169,7 @@ class PassthroughNavigator:
         self._vel = rot @ self._vel
         self._p_pos = rot @ self._p_pos @ rot.T
         self._p_vel = rot @ self._p_vel @ rot.T
+        self._diagonal = False
 
 
 def speed_mps(vel_ned_mps: FloatArray) -> float:

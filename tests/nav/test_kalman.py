@@ -9,8 +9,10 @@ from scipy.stats import chi2
 from companion.nav.kalman import (
     InnovationWindow,
     chi2_gate,
+    discretise_second_order,
     innovation_stats,
     joseph_update,
+    joseph_update_diag_r,
     predict_covariance,
     van_loan,
 )
@@ -150,3 +152,53 @@ def test_innovation_window_running_mean_matches_exact() -> None:
     for k, v in enumerate(values):
         w.add(0, float(v))
         assert w.mean(0) == pytest.approx(np.mean(values[max(0, k - 24) : k + 1]), rel=1e-12)
+
+
+def test_joseph_update_diag_r_is_the_same_update_as_a_full_diagonal_r() -> None:
+    # the diagonal-R variant skips the zero products of a full R: bit-identical results
+    rng = np.random.default_rng(11)
+    for m in (1, 3, 5, 6):
+        a = rng.normal(size=(18, 18))
+        p = a @ a.T + np.eye(18)
+        h = np.zeros((m, 18))
+        h[np.arange(m), rng.choice(18, m, replace=False)] = 1.0
+        h[0, 17] = 1.0
+        r = rng.uniform(0.01, 2.0, m)
+        nu = rng.normal(size=m)
+        full = joseph_update(p, nu, h, np.diag(r))
+        diag = joseph_update_diag_r(p, nu, h, r)
+        for name in ("dx", "p_post", "gain", "innov_cov", "std_innov"):
+            np.testing.assert_array_equal(getattr(diag, name), getattr(full, name))
+        assert diag.nis == full.nis
+        # and both are the textbook update (K from S^-1, P+ = (I - K H) P)
+        s = h @ p @ h.T + np.diag(r)
+        k = p @ h.T @ np.linalg.inv(s)
+        np.testing.assert_allclose(diag.gain, k, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(diag.p_post, (np.eye(18) - k @ h) @ p, atol=1e-9)
+
+
+def test_joseph_update_rejects_an_indefinite_innovation_covariance() -> None:
+    p = np.eye(3)
+    with pytest.raises(ValueError, match="positive definite"):
+        joseph_update(p, np.zeros(3), np.eye(3), -2.0 * np.eye(3))
+    with pytest.raises(ValueError, match="positive definite"):
+        joseph_update_diag_r(p, np.zeros(3), np.eye(3), np.array([1.0, -5.0, 1.0]))
+
+
+def test_discretise_second_order_matches_its_formula_and_keeps_inputs() -> None:
+    rng = np.random.default_rng(5)
+    f = rng.normal(size=(6, 6)) * 0.3
+    g = rng.uniform(0.0, 1.0, 6)
+    f0, g0 = f.copy(), g.copy()
+    dt = 0.1
+    phi, qd = discretise_second_order(f, g, dt)
+    fdt = f * dt
+    want_phi = np.eye(6) + fdt + 0.5 * (fdt @ fdt)
+    np.testing.assert_array_equal(phi, want_phi)
+    np.testing.assert_allclose(qd, 0.5 * dt * (want_phi @ np.diag(g) @ want_phi.T + np.diag(g)))
+    np.testing.assert_array_equal(f, f0)
+    np.testing.assert_array_equal(g, g0)
+    # the shared identity behind it is never handed out writable
+    phi2, _ = discretise_second_order(f, g, dt)
+    phi2 += 1.0
+    np.testing.assert_array_equal(discretise_second_order(f, g, dt)[0], want_phi)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.stats import chi2
 
 from companion.nav.navigator import GnssMeasurement
@@ -66,3 +67,33 @@ def test_nis_is_chi2_consistent_on_noisy_fixes_and_gate_rate_matches():
     # compare with 3 and a bound twice the independent half-width
     assert abs(np.mean(nis) - 3.0) < 2 * (hi - 3.0), np.mean(nis)
     assert rejected / m < 0.03
+
+
+def test_diagonal_closed_form_nis_equals_the_general_solve() -> None:
+    # every fix leaves the covariances diagonal: NIS is nu_i^2 / S_ii; after a frame
+    # shift (rotated covariances) the general solve is used; both agree with S^-1
+    from companion.nav.frames import LocalFrame
+
+    rng = np.random.default_rng(2)
+    nav = PassthroughNavigator()
+    vel = np.array([15.0, 4.0, -1.0])
+    for k in range(20):
+        t = 0.1 * k
+        pos = vel * t + rng.normal(0.0, 0.5, 3)
+        pred = nav.predict(t)
+        up = nav.on_gnss(meas(t, pos, vel), gate=False)
+        if pred is not None:
+            s = pred.pos_cov_ned_m2 + np.diag(np.full(3, 0.25))
+            nu = pos - pred.pos_ned_m
+            assert up.nis == pytest.approx(float(nu @ np.linalg.solve(s, nu)), rel=1e-12)
+            np.testing.assert_allclose(up.innovation_cov, s, rtol=1e-15)
+    old = LocalFrame(0.8, 0.1, 100.0)
+    new = LocalFrame(0.8001, 0.1002, 120.0)
+    nav.shift_frame(old, new)
+    pred = nav.predict(2.0)
+    assert pred is not None
+    pos = pred.pos_ned_m + np.array([0.3, -0.2, 0.1])
+    up = nav.on_gnss(meas(2.0, pos, vel), gate=False)
+    s = pred.pos_cov_ned_m2 + np.diag(np.full(3, 0.25))
+    nu = pos - pred.pos_ned_m
+    assert up.nis == pytest.approx(float(nu @ np.linalg.solve(s, nu)), rel=1e-12)

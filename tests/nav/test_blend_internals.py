@@ -1,0 +1,51 @@
+"""The blend's hand-expanded small steps equal the matrix forms they replace."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from companion.nav import ins
+from companion.nav.blend import _carry_pos_vel, _euler_to_quat
+from companion.nav.frames import euler_to_quat
+
+
+def test_carry_pos_vel_equals_the_transition_form() -> None:
+    # Phi P Phi^T + Q with Phi = [[I, dt I], [0, I]] on position/velocity of an 18-state P
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        a = rng.normal(size=(18, 18))
+        p = a @ a.T
+        psd = rng.uniform(1e-6, 1e-1, 3)
+        dt = float(rng.uniform(0.0, 0.1))
+        phi = np.eye(18)
+        phi[0:3, 3:6] = dt * np.eye(3)
+        q = np.zeros((18, 18))
+        q[0:3, 0:3] = np.diag(psd) * dt**3 / 3.0
+        q[0:3, 3:6] = q[3:6, 0:3] = np.diag(psd) * dt**2 / 2.0
+        q[3:6, 3:6] = np.diag(psd) * dt
+        want = phi @ p @ phi.T + q
+        got = _carry_pos_vel(p, dt, psd)
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+
+
+def test_float_euler_to_quat_is_the_frames_formula_bit_for_bit() -> None:
+    rng = np.random.default_rng(9)
+    for roll, pitch, yaw in rng.uniform(-math.pi, math.pi, (200, 3)):
+        assert _euler_to_quat(roll, pitch, yaw) == tuple(euler_to_quat(roll, pitch, yaw).tolist())
+
+
+def test_mechanisation_inject_matches_the_per_component_form() -> None:
+    rng = np.random.default_rng(1)
+    mech = ins.Mechanisation(ins.LocalGravity(0.8, 100.0))
+    mech.initialise(0.0, np.array([1.0, 2.0, -3.0]), np.array([10.0, 1.0, 0.5]), (1.0, 0, 0, 0))
+    dx = rng.normal(0.0, 1e-3, 15)
+    pos0, vel0 = list(mech.pos), list(mech.vel)
+    q0 = mech.q_nb
+    mech.inject(dx)
+    assert mech.pos == [pos0[i] - float(dx[i]) for i in range(3)]
+    assert mech.vel == [vel0[i] - float(dx[3 + i]) for i in range(3)]
+    assert mech.ba == [-float(dx[9 + i]) for i in range(3)]
+    assert mech.bg == [-float(dx[12 + i]) for i in range(3)]
+    assert mech.q_nb == ins.rotate_by_psi(q0, dx[6:9])
