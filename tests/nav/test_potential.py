@@ -103,7 +103,8 @@ def test_transition_rejects_bad_input() -> None:
 
 def test_large_alpha_w_form_equals_general_form() -> None:
     # S0: for large α only the newest fix matters and
-    # k(t) = k_0n + W1(t) Δk_n + W2(t) k̇_n with A_k ≈ 2 p_kn.
+    # k(t) = k_0n + W1(t) Δk_n + W2(t) k̇_n with A_k ≈ 2 p_kn, and p_kn = 1 with
+    # the weights relative to the newest fix's (G·A independent of σ).
     rng = np.random.default_rng(3)
     n = 8
     t_src = np.arange(n) * 2.0  # S0's 2-s steps
@@ -117,13 +118,13 @@ def test_large_alpha_w_form_equals_general_form() -> None:
     ts = np.linspace(0.0, 2.0, 9)
     for t in ts:
         general, _ = propagate_state(particle, vel, a, b, g, alpha, t)
-        w1, w2, _, _ = transition_axis(g * 2.0 / var, alpha, t)
+        w1, w2, _, _ = transition_axis(g * 2.0, alpha, t)
         w_form = pos_src[-1] + w1 * (particle - pos_src[-1]) + w2 * vel
         np.testing.assert_allclose(general, w_form, atol=1e-6)
     # with a single source the two are the same for any α
     a1, b1 = field_sums(t_src[-1:], pos_src[-1:], p_src[-1:], 0.3, t_src[-1])
     general, _ = propagate_state(particle, vel, a1, b1, g, 0.3, 1.7)
-    w1, w2, _, _ = transition_axis(g * 2.0 / var, 0.3, 1.7)
+    w1, w2, _, _ = transition_axis(g * 2.0, 0.3, 1.7)
     np.testing.assert_allclose(general, pos_src[-1] + w1 * (particle - pos_src[-1]) + w2 * vel)
 
 
@@ -158,9 +159,11 @@ def _model_track(
 @pytest.mark.parametrize(("alpha", "g"), [(2.84, 0.35), (3.82, 0.54), (8.0, 2.0), (6.0, 20.0)])
 def test_fit_recovers_model_alpha_and_g(alpha: float, g: float) -> None:
     ts, pos, vel, var = _model_track(alpha, g)
+    # S0's objective alone (the multi-step terms are not zero on model data:
+    # a frozen-field prediction ignores the sources added along the way)
     cfg = PotentialConfig(
-        window_s=20.0, velocity_mode="carried", alpha0_ps=1.0, g0_m2ps2=1.0,
-        de_maxiter=60, de_popsize=15, de_tol=1e-8, seed=11,
+        window_s=20.0, velocity_mode="carried", alpha0_ps=1.0, g0_ps2=1.0,
+        de_maxiter=60, de_popsize=15, de_tol=1e-8, seed=11, fit_horizons_s=(),
     )  # fmt: skip
     f = PotentialFilter(cfg)
     for i in range(ts.size):
@@ -170,10 +173,10 @@ def test_fit_recovers_model_alpha_and_g(alpha: float, g: float) -> None:
     out = f.refit(force=True)
     assert out is not None
     assert f.alpha_ps == pytest.approx(alpha, rel=1e-3)
-    assert f.g_m2ps2 == pytest.approx(g, rel=1e-3)
+    assert f.g_ps2 == pytest.approx(g, rel=1e-3)
     assert f.last_fit_cost_m2 is not None and f.last_fit_cost_m2 < 1e-6
     values = {nv.name: nv.value for nv in f.outputs(ts[-1])}
-    assert values == {NAME_ALPHA: f.alpha_ps, NAME_G: f.g_m2ps2}
+    assert values == {NAME_ALPHA: f.alpha_ps, NAME_G: f.g_ps2}
 
 
 def test_fit_is_deterministic_and_measured_mode_matches_carried_on_model_data() -> None:
@@ -189,7 +192,10 @@ def test_fit_is_deterministic_and_measured_mode_matches_carried_on_model_data() 
         assert cost[1] < 1e-15 and cost[0] > 1.0 and cost[2] > 1.0
     results = []
     for _ in range(2):
-        f = PotentialFilter(PotentialConfig(window_s=20.0, alpha0_ps=1.0, g0_m2ps2=1.0))
+        cfg = PotentialConfig(
+            window_s=20.0, alpha0_ps=1.0, g0_ps2=1.0, fit_horizons_s=(), velocity_weights=(1.0,)
+        )
+        f = PotentialFilter(cfg)
         for i in range(ts.size):
             f.add_fix(ts[i], pos[i], var, vel[i], force=True, refit=False)
         results.append(f.refit(force=True))
@@ -337,6 +343,21 @@ def test_restarts_after_persistent_inconsistency() -> None:
     assert all(r.accepted for r in reasons[4:])
     pred = f.predict(t[k0 + 6])
     assert np.linalg.norm(pred.pos_ned_m - (meas[k0 + 6] + jump)) < 10.0
+    # the suspect model tests nothing until the restarted window is refitted,
+    # which happens once it spans first_fit_span_s: no restart loop
+    assert not f.calibrated
+    fits = f.fit_count
+    t_restart = t[k0 + 3]
+    k = k0 + 6
+    while f.fit_count == fits:
+        res = f.add_fix(t[k], meas[k] + jump, var, vmeas[k])
+        assert res.accepted and not res.tested
+        k += 1
+    assert t[k - 1] - t_restart <= cfg.first_fit_span_s + 1e-9
+    assert f.calibrated
+    for j in range(k, t.size):
+        assert f.add_fix(t[j], meas[j] + jump, var, vmeas[j]).tested
+    assert f.rejections["restart"] == 1
 
 
 def test_config_is_validated() -> None:
@@ -347,7 +368,7 @@ def test_config_is_validated() -> None:
         {"alpha0_ps": 50.0},
         {"velocity_mode": "other"},
         {"max_sources": 0},
-        {"g_bounds_m2ps2": (0.0, 1.0)},
+        {"g_bounds_ps2": (0.0, 1.0)},
     ):
         with pytest.raises(ValueError):
             PotentialConfig(**bad)  # type: ignore[arg-type]
@@ -384,10 +405,45 @@ def test_combine_predictions_is_the_information_weighted_mean() -> None:
         combine_predictions(a, np.zeros((3, 3)), b, np.zeros((3, 3)))
 
 
+def test_combine_predictions_with_shared_error() -> None:
+    # b is a's prediction plus independent noise: e_b = e_a + n, so P_ab = P_a
+    # and b adds nothing -> K = 0; with P_ab = 0 the combination would (wrongly)
+    # move towards b and shrink the covariance
+    rng = np.random.default_rng(10)
+    m = rng.normal(size=(3, 3))
+    pa = m @ m.T + 0.5 * np.eye(3)
+    pn = np.diag([0.3, 0.7, 1.1])
+    a, b = rng.normal(size=3), rng.normal(size=3)
+    pos, cov = combine_predictions(a, pa, b, pa + pn, pa)
+    np.testing.assert_allclose(pos, a, atol=1e-12)
+    np.testing.assert_allclose(cov, pa, atol=1e-12)
+    # a Monte-Carlo check of the general case: the returned covariance is the
+    # error covariance of the combination, and no other gain does better
+    n = 200_000
+    la = np.linalg.cholesky(pa)
+    ea = rng.normal(size=(n, 3)) @ la.T
+    mix = np.diag([0.8, -0.3, 0.5])
+    eb = ea @ mix.T + rng.normal(size=(n, 3)) @ np.linalg.cholesky(pn).T
+    pab = pa @ mix.T
+    pb = mix @ pa @ mix.T + pn
+    zero = np.zeros(3)
+    x, p = combine_predictions(zero, pa, zero, pb, pab)
+    np.testing.assert_allclose(x, 0.0, atol=1e-12)
+    k = (pa - pab) @ np.linalg.inv(pa + pb - pab - pab.T)
+    e = ea + (eb - ea) @ k.T
+    np.testing.assert_allclose(np.cov(e.T), p, rtol=0.03, atol=0.01)
+    # ignoring P_ab claims a smaller covariance than it achieves
+    _x, p_indep = combine_predictions(zero, pa, zero, pb)
+    k_indep = pa @ np.linalg.inv(pa + pb)
+    e_indep = ea + (eb - ea) @ k_indep.T
+    assert np.trace(np.cov(e.T)) < np.trace(np.cov(e_indep.T))
+    assert np.trace(p_indep) < np.trace(np.cov(e_indep.T))
+
+
 def test_particle_without_velocity_starts_where_velocity_becomes_known() -> None:
     # positions only: the first fix gives no velocity, so the particle must not
     # be carried from it with a placeholder velocity (that would leave a lag)
-    cfg = PotentialConfig(alpha0_ps=10.0, g0_m2ps2=1e-6, g_bounds_m2ps2=(1e-6, 1.0))
+    cfg = PotentialConfig(alpha0_ps=10.0, g0_ps2=1e-6, g_bounds_ps2=(1e-6, 1.0))
     f = PotentialFilter(cfg)
     vel = np.array([60.0, -5.0, 3.0])
     for k in range(3):
@@ -396,3 +452,330 @@ def test_particle_without_velocity_starts_where_velocity_becomes_known() -> None
     pred = f.predict(1.4)
     np.testing.assert_allclose(pred.pos_ned_m, vel * 1.4, atol=1e-3)
     np.testing.assert_allclose(pred.vel_ned_mps, vel, atol=1e-3)
+
+
+# --------------------------------------------------------------------------- fast paths, replay
+
+
+def test_filter_fast_prediction_equals_general_closed_form() -> None:
+    # the filter's per-anchor form (precomputed Bessel constants at s0) against
+    # propagate_state over the branches: scipy range, small-argument series
+    # (long horizons, tiny G·A), large s0 (falls back), mixed axes
+    from companion.nav.potential import _anchor_propagate, _make_anchor
+
+    rng = np.random.default_rng(21)
+    pos = np.array([120.0, -40.0, -300.0])
+    vel = np.array([60.0, 5.0, 3.0])
+    for alpha in (1e-3, 0.5, 2.84, 10.0):
+        for g in (1e-9, 1e-3, 0.35, 50.0):
+            a = np.array([4.0, 4.0, 1.0]) * 10.0 ** rng.uniform(0.0, 3.0)
+            b = a * (pos - rng.normal(0.0, 20.0, 3))
+            anc = _make_anchor(0.0, pos, vel, alpha, g, a, b)
+            for h in (0.0, 0.013, 0.1, 1.0, 5.0, 20.0, 300.0):
+                p_fast, v_fast = _anchor_propagate(anc, h)
+                p_ref, v_ref = propagate_state(pos, vel, a, b, g, alpha, h)
+                scale = 1.0 + np.abs(p_ref - pos).max()
+                np.testing.assert_allclose(p_fast, p_ref, rtol=0, atol=1e-9 * scale)
+                np.testing.assert_allclose(
+                    v_fast, v_ref, rtol=0, atol=1e-9 * (1 + abs(v_ref).max())
+                )
+
+
+def test_replay_functions_share_one_replay() -> None:
+    from companion.nav.potential import fit_pairs, replay_anchors, replay_state
+
+    ts, pos, vel, var = _model_track(2.84, 0.35, n=30)
+    rng = np.random.default_rng(4)
+    meas = pos + rng.normal(0.0, 0.5, pos.shape)
+    p = np.tile(1.0 / var, (ts.size, 1))
+    reset = vel + rng.normal(0.0, 0.1, vel.shape)
+    reset[:, 2] = np.nan
+    al, g = 3.3, 0.2
+    apos, avel, aa, bb = replay_anchors(al, g, ts, meas, p, reset, meas[0], vel[0])
+    sp, sv = replay_state(al, g, ts, meas, p, reset, meas[0], vel[0])
+    np.testing.assert_array_equal(sp, apos[-1])
+    np.testing.assert_array_equal(sv, avel[-1])
+    # the field sums are S0's sums at each fix; each carried position is the
+    # frozen-field prediction from the previous fix
+    for i in (0, 7, ts.size - 1):
+        a_ref, b_ref = field_sums(ts[: i + 1], meas[: i + 1], p[: i + 1], al, ts[i])
+        np.testing.assert_allclose(aa[i], a_ref, rtol=1e-12)
+        np.testing.assert_allclose(bb[i], b_ref, rtol=1e-12)
+    one_step = sum(
+        float(np.sum((propagate_state(apos[i - 1], avel[i - 1], aa[i - 1], bb[i - 1], g, al,
+                                      ts[i] - ts[i - 1])[0] - meas[i]) ** 2))
+        for i in range(1, ts.size)
+    )  # fmt: skip
+    c0 = replay_cost(np.array([al]), np.array([g]), ts, meas, p, reset, meas[0], vel[0])
+    assert c0[0] == pytest.approx(one_step, rel=1e-9)
+    jj, kk = fit_pairs(ts, (0.5, 2.0), 1.0)
+    assert jj.size > 0 and np.all(kk > jj) and np.all(ts[kk] - ts[jj] >= 0.5 - 1e-9)
+    multi = sum(
+        float(np.sum((propagate_state(apos[j], avel[j], aa[j], bb[j], g, al, ts[k] - ts[j])[0]
+                      - meas[k]) ** 2))
+        for j, k in zip(jj, kk, strict=True)
+    )  # fmt: skip
+    c1 = replay_cost(np.array([al]), np.array([g]), ts, meas, p, reset, meas[0], vel[0], (jj, kk))
+    assert c1[0] == pytest.approx(one_step + multi, rel=1e-9)
+
+
+def test_fit_pairs_starts_and_horizons() -> None:
+    from companion.nav.potential import fit_pairs
+
+    t = np.arange(0.0, 3.01, 0.25)  # 13 fixes
+    jj, kk = fit_pairs(t, (0.5, 1.0), 1.0)
+    # starts at 0, 1, 2 s; ends 0.5 and 1 s later, beyond the last fix dropped
+    assert list(zip(t[jj], t[kk], strict=True)) == [
+        (0.0, 0.5), (0.0, 1.0), (1.0, 1.5), (1.0, 2.0), (2.0, 2.5), (2.0, 3.0),
+    ]  # fmt: skip
+    assert fit_pairs(t, (), 1.0)[0].size == 0
+
+
+def test_reset_velocity_blends_and_fills() -> None:
+    from companion.nav.potential import reset_velocity
+
+    vm = np.array([10.0, np.nan, 2.0, np.nan])
+    vd = np.array([12.0, 3.0, np.nan, np.nan])
+    out = reset_velocity(vm, vd, 0.25)
+    np.testing.assert_allclose(out[:3], [11.5, 3.0, 2.0])
+    assert np.isnan(out[3])
+
+
+# --------------------------------------------------------------------------- velocity weight
+
+
+def _straight(
+    seed: int, pos_sigma: float, vel_sigma: float, t_end: float = 30.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, t_end, 0.1)
+    v = np.array([55.0, 12.0, 2.9])
+    truth = t[:, None] * v
+    meas = truth + rng.normal(0.0, pos_sigma, truth.shape)
+    vm = v + rng.normal(0.0, vel_sigma, truth.shape)
+    vm[:, 2] = np.nan  # GPS_RAW_INT: no vertical velocity
+    return t, truth, meas, vm, np.full(3, pos_sigma**2)
+
+
+@pytest.mark.parametrize(
+    ("pos_sigma", "vel_sigma", "expect_measured"), [(0.02, 0.3, False), (1.0, 0.02, True)]
+)
+def test_velocity_weight_follows_the_better_source(
+    pos_sigma: float, vel_sigma: float, expect_measured: bool
+) -> None:
+    # precise positions and a noisy velocity: the position slope wins; noisy
+    # positions and a precise velocity: the receiver's velocity wins
+    t, _truth, meas, vm, var = _straight(5, pos_sigma, vel_sigma)
+    f = PotentialFilter(PotentialConfig(seed=5))
+    for k in range(t.size):
+        f.add_fix(t[k], meas[k], var, vm[k])
+    assert f.fit_count >= 2
+    if expect_measured:
+        assert f.velocity_weight >= 0.75
+    else:
+        assert f.velocity_weight <= 0.25
+
+
+def test_gap_covariance_covers_correlated_fix_errors() -> None:
+    # RTK-like fixes: small, slowly varying (Gauss-Markov, 60 s) errors that the
+    # window's residuals against the fixes cannot see; the predicted
+    # covariance must still cover the error against the truth (NEES ~ 3)
+    rng = np.random.default_rng(12)
+    dt, tau = 0.1, 60.0
+    t = np.arange(0.0, 120.0, dt)
+    sig = np.array([0.015, 0.015, 0.03])
+    phi = np.exp(-dt / tau)
+    err = np.empty((t.size, 3))
+    err[0] = rng.normal(0.0, 1.0, 3) * sig
+    for k in range(1, t.size):
+        err[k] = phi * err[k - 1] + np.sqrt(1 - phi**2) * sig * rng.normal(0.0, 1.0, 3)
+    v = np.array([33.0, 0.5, 1.7])
+    truth = t[:, None] * v
+    vm = v + rng.normal(0.0, 0.05, truth.shape)
+    vm[:, 2] = np.nan
+    f = PotentialFilter(PotentialConfig(seed=12))
+    nees: list[float] = []
+    for k in range(t.size):
+        if k > 300 and k % 25 == 0 and k + 50 < t.size:
+            for j in (10, 50):  # 1 s and 5 s ahead
+                pred = f.predict(t[k - 1] + j * dt)
+                e = truth[k - 1 + j] - pred.pos_ned_m
+                nees.append(float(e @ np.linalg.solve(pred.cov_ned_m2, e)))
+        f.add_fix(t[k], truth[k] + err[k], sig**2, vm[k])
+    assert len(nees) > 40
+    assert 1.0 < float(np.mean(nees)) < 6.0, np.mean(nees)
+
+
+# ------------------------------------------------------------- accuracy class, real flights
+
+
+def test_field_strength_does_not_depend_on_the_fixes_accuracy_class() -> None:
+    # weights relative to the newest fix's: the same fixes reported at 1.5 cm
+    # (RTK) or 1.5 m give the same field, the same fit and the same particle
+    rng = np.random.default_rng(31)
+    t = np.arange(0.0, 12.0, 0.1)
+    v = np.array([38.0, 9.0, -1.5])
+    truth = t[:, None] * v + 0.5 * np.array([0.0, 1.2, 0.0]) * t[:, None] ** 2
+    meas = truth + rng.normal(0.0, 0.02, truth.shape)
+    vm = v + np.array([0.0, 1.2, 0.0]) * t[:, None] + rng.normal(0.0, 0.05, truth.shape)
+    sig = np.array([0.015, 0.015, 0.03])
+    a_small, b_small = field_sums(t, meas, np.tile(1.0 / sig**2, (t.size, 1)), 2.84, t[-1])
+    a_big, b_big = field_sums(t, meas, np.tile(1e-4 / sig**2, (t.size, 1)), 2.84, t[-1])
+    np.testing.assert_allclose(a_small, a_big, rtol=1e-12)
+    np.testing.assert_allclose(b_small, b_big, rtol=1e-12)
+    # uniform accuracy: A = 2 Σ e^{α(t_i − t_n)} on every axis, whatever σ is
+    np.testing.assert_allclose(a_small, 2.0 * np.exp(2.84 * (t - t[-1])).sum(), rtol=1e-12)
+    cfg = PotentialConfig(
+        seed=3, position_update=False, velocity_weights=(1.0,), velocity_fit_orders=(1,)
+    )
+    filters = [PotentialFilter(cfg), PotentialFilter(cfg)]
+    for f, scale in zip(filters, (1.0, 100.0), strict=True):
+        for k in range(t.size):
+            f.add_fix(t[k], meas[k], (scale * sig) ** 2, vm[k], force=True)
+    assert filters[0].fit_count >= 2
+    assert filters[0].alpha_ps == pytest.approx(filters[1].alpha_ps, rel=1e-9)
+    assert filters[0].g_ps2 == pytest.approx(filters[1].g_ps2, rel=1e-9)
+    for h in (0.1, 2.0, 10.0):
+        np.testing.assert_allclose(
+            filters[0].predict(t[-1] + h).pos_ned_m,
+            filters[1].predict(t[-1] + h).pos_ned_m,
+            rtol=0,
+            atol=1e-8,
+        )
+
+
+def _sim_one_step(scenario: str, seed: int) -> dict[str, np.ndarray | int | float]:
+    """The engine's use on a simulated flight: receiver 0's fixes as measurements, the
+    prediction at each new fix's time compared with it, then the fix added."""
+    from companion.engine import gnss_measurement
+    from companion.sim import make_scenario, simulate
+    from companion.types import GnssFix
+
+    fl = simulate(make_scenario(scenario), seed)
+    f = PotentialFilter(PotentialConfig())
+    chi2_s: list[float] = []  # against the filter's innovation covariance (its fix test)
+    chi2_pr: list[float] = []  # against P + R (the prediction's covariance vs truth + fix's)
+    horizon: list[float] = []
+    t_fix: list[float] = []
+    t_fits: list[float] = []
+    t_restarts: list[float] = []
+    for s in fl.samples:
+        if not (isinstance(s, GnssFix) and s.receiver_id == 0):
+            continue
+        m = gnss_measurement(s, fl.frame)
+        if f.calibrated and f.t_last_s is not None and m.t_s > f.t_last_s:
+            pr = f.predict(m.t_s)
+            d = m.pos_ned_m - pr.pos_ned_m
+            # fixes as accurate as the newest throughout these flights: the
+            # published innovation covariance is the fix test's S
+            assert np.all(m.pos_var_ned_m2 == pr.anchor_var_ned_m2)
+            c2 = float(d @ np.linalg.solve(pr.innov_cov_ned_m2, d))
+            probe = f.test_fix(m.t_s, m.pos_ned_m, m.pos_var_ned_m2)
+            if probe.tested:  # not while the window is short (after a GNSS loss)
+                assert probe.chi2 == pytest.approx(c2, rel=1e-9)
+            chi2_s.append(c2)
+            horizon.append(pr.horizon_s)
+            s_pr = pr.cov_ned_m2 + np.diag(m.pos_var_ned_m2)
+            chi2_pr.append(float(d @ np.linalg.solve(s_pr, d)))
+        n_fit, n_restart = f.fit_count, f.rejections.get("restart", 0)
+        f.add_fix(m.t_s, m.pos_ned_m, m.pos_var_ned_m2, m.vel_ned_mps)
+        t_fix.append(m.t_s)
+        if f.fit_count > n_fit:
+            t_fits.append(m.t_s)
+        if f.rejections.get("restart", 0) > n_restart:
+            t_restarts.append(m.t_s)
+    return {
+        "chi2": np.array(chi2_s),
+        "chi2_pr": np.array(chi2_pr),
+        "horizon": np.array(horizon),
+        "t_fix": np.array(t_fix),
+        "t_fits": np.array(t_fits),
+        "t_restarts": np.array(t_restarts),
+    }
+
+
+def _fit_gaps_in_fix_time(t_fix: np.ndarray, t_fits: np.ndarray) -> np.ndarray:
+    """Fix time between consecutive fits, not counting spans without fixes (GNSS loss)."""
+    dt = np.diff(t_fix)
+    step = float(np.median(dt))
+    fix_time = np.concatenate([[0.0], np.cumsum(np.minimum(dt, 2.0 * step))])
+    return np.diff(np.interp(t_fits, t_fix, fix_time))
+
+
+@pytest.mark.parametrize(
+    ("scenario", "max_restarts"),
+    [
+        # RTK fixed (1.5 cm, errors correlated over 30 s), MEMS IMU: parked,
+        # taxi with turns, take-off, 40 m/s cruise with turns, approach (931 s).
+        # A restart is the filter's answer to a manoeuvre its coasting particle
+        # did not foresee (a turn's onset, the take-off roll): at most one per
+        # onset, never a loop.
+        ("nominal", 15),
+        # DGPS (0.5 m / 1.0 m, correlated over 120 s), 60 s with no GNSS at all
+        ("cruise_gnss_loss", 3),
+    ],
+)
+def test_one_step_consistency_on_simulated_flights(scenario: str, max_restarts: int) -> None:
+    r = _sim_one_step(scenario, 1)
+    chi2, horizon = r["chi2"], r["horizon"]
+    assert isinstance(chi2, np.ndarray) and isinstance(horizon, np.ndarray)
+    # every prediction over less than a second: one fix interval, or up to
+    # four while a run of fixes is rejected; not those from before the 60-s
+    # loss to the first fixes after it (a kilometre off after a minute of
+    # turning without an IMU: rejected, then a restart on the new fixes)
+    one_step = horizon < 1.0
+    cfg = PotentialConfig()
+    assert np.count_nonzero(~one_step) <= cfg.max_consecutive_inconsistent + 1
+    chi2 = chi2[one_step]
+    assert chi2.size > 2000
+    q = stats.chi2.isf(1e-3, 3)
+    # the fix test's statistic is χ²(3)-like: few false alarms, mean near 3
+    assert np.mean(chi2 > q) <= 0.01
+    assert 2.0 <= float(np.mean(chi2)) <= 4.5
+    # P + R (the prediction's error against the truth plus the fix's) is
+    # conservative for this test: the fixes' slowly varying errors are shared
+    # by the prediction; no more exceedances than the innovation test
+    chi2_pr = r["chi2_pr"]
+    assert isinstance(chi2_pr, np.ndarray)
+    assert np.mean(chi2_pr[one_step] > q) <= 0.01
+    # no restart loop: few restarts, separated by fits
+    t_restarts, t_fits, t_fix = r["t_restarts"], r["t_fits"], r["t_fix"]
+    assert isinstance(t_restarts, np.ndarray) and isinstance(t_fits, np.ndarray)
+    assert isinstance(t_fix, np.ndarray)
+    assert t_restarts.size <= max_restarts
+    for tr in t_restarts:
+        assert np.any((t_fits > tr) & (t_fits <= tr + 3.0)), f"no fit after the restart at {tr}"
+    # fits keep happening at refit_interval_s (a restart's await adds first_fit_span_s)
+    assert t_fits.size > 0 and t_fits[0] < t_fix[0] + cfg.refit_interval_s
+    gaps = _fit_gaps_in_fix_time(t_fix, t_fits)
+    assert gaps.max() <= cfg.refit_interval_s + cfg.first_fit_span_s + 0.5
+    assert t_fix[-1] - t_fits[-1] <= cfg.refit_interval_s + 0.5
+
+
+def test_speed_change_triggers_a_refit() -> None:
+    # parked 12 s, then a take-off roll at 2 m/s²: α and G fitted on the parked
+    # window are refitted once the speed leaves its band, not refit_interval_s later
+    rng = np.random.default_rng(41)
+    cfg = PotentialConfig(seed=41, refit_interval_s=5.0)
+    f = PotentialFilter(cfg)
+    t = np.arange(0.0, 20.0, 0.1)
+    roll = np.clip(t - 12.0, 0.0, None)
+    truth = np.column_stack([roll**2, np.zeros_like(t), np.zeros_like(t)])
+    vel = np.column_stack([2.0 * roll, np.zeros_like(t), np.full_like(t, np.nan)])
+    sig = np.array([0.015, 0.015, 0.03])
+    fit_t: list[float] = []
+    for k in range(t.size):
+        n = f.fit_count
+        f.add_fix(t[k], truth[k] + rng.normal(0.0, 1.0, 3) * sig * 0.1, sig**2, vel[k])
+        if f.fit_count > n:
+            fit_t.append(float(t[k]))
+    before = [x for x in fit_t if x <= 12.0]
+    after = np.array([x for x in fit_t if x > 12.0])
+    # parked: the periodic fits only
+    assert np.all(np.diff(before) >= cfg.refit_interval_s - 1e-9)
+    # rolling: refitted each time the speed leaves its band (1 m/s + 20 %),
+    # well before refit_interval_s, and never closer than refit_min_interval_s
+    assert after.size >= 4
+    gaps = np.diff(after)
+    assert np.all(gaps < cfg.refit_interval_s - 1.0)
+    assert np.all(gaps >= cfg.refit_min_interval_s - 1e-9)
