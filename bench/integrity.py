@@ -27,6 +27,23 @@ residual tests on the receiver pair, the phase logic (approach, landing) and
 the protection levels against CAT II limits, but not the INS or take-off/taxi.
 The end of the run replays the simulator's ramp_fault, dither_fault and
 nominal flights (S3 cases) through the monitor.
+
+**With an inertial reference** (issue 6; ``--ins-runs N`` per case, default 3,
+``--ins-hours H`` of nominal flight per row, default 0.5, ``--jobs J`` processes,
+default 2; the defaults keep the whole bench near 15 min on 2 cores, each
+simulated flight through the blend costs seconds): simulated approaches
+(:mod:`companion.sim`, the "approach" scenario: 3 deg glide from 250 m at
+33 m/s, flare, landing roll; RTK fixed at 10 Hz, IMU at 100 Hz), flown by the
+GNSS/INS blend (:class:`companion.nav.blend.BlendNavigator`) with the inertial
+coast (:class:`companion.integrity.coast.InertialCoast`, 6 slots over 30 s,
+anchored from the blend with its accelerometer-bias estimate, not while a fault
+is reported) giving references to the monitor
+(:func:`companion.integrity.synthetic.run_samples_ins`). The fault (same kinds
+and sizes, plus vertical- and horizontal-only 4 cm/s ramps) is injected on
+receiver 0 at a random time 40-80 s into the glide, in a random direction.
+Rows: one receiver with a tactical IMU (beside the same flights without the
+references: "no ref", the baseline), one receiver with a MEMS IMU, two
+receivers with a tactical IMU (attribution: which receiver was excluded).
 """
 
 from __future__ import annotations
@@ -36,6 +53,7 @@ import logging
 import math
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,6 +70,7 @@ from companion.integrity.synthetic import (  # noqa: E402
     run_approach,
     run_samples,
 )
+from companion.nav.navigator import NavState  # noqa: E402
 
 FIELD_M = 110.0
 CAT = ApproachCategory.CAT_II
@@ -257,11 +276,274 @@ def sim_flights() -> None:
         print(f"{name:<14} {desc:<32} {after[0][1]:>12} {tau:8.2f} {size:7.2f} {len(res.alarms)}")
 
 
+INS_CASES = [
+    Case("step 0.2 m", "step", 0.2, "random"),
+    Case("step 1 m", "step", 1.0, "random"),
+    Case(f"step VAL {LIMIT.val_m} m", "step", LIMIT.val_m, "vertical", True),
+    Case("step 10 m", "step", 10.0, "random", True),
+    Case("ramp 1 cm/s", "ramp", 0.01, "random"),
+    Case("ramp 2 cm/s", "ramp", 0.02, "random"),
+    Case("ramp 4 cm/s", "ramp", 0.04, "random"),
+    Case("ramp 4 cm/s vert", "ramp", 0.04, "vertical"),
+    Case("ramp 4 cm/s horiz", "ramp", 0.04, "horizontal"),
+    Case("ramp 10 cm/s", "ramp", 0.10, "random"),
+    Case("dither 0.5 m", "dither", 0.5, "random"),
+    Case("dither 1 m", "dither", 1.0, "random"),
+    Case("dither 2 m", "dither", 2.0, "random"),
+    Case("dither 5 m", "dither", 5.0, "random"),
+]
+INS_ROWS = (("tactical", 1), ("mems", 1), ("tactical", 2))
+GLIDE_START_S = 30.0
+"""The approach scenario's descent starts 30 s into the autopilot clock (10 s boot + 20 s)."""
+
+
+@dataclass(frozen=True)
+class InsOutcome:
+    """One simulated flight through blend + coast + monitor (picklable for the pool)."""
+
+    fault: Fault | None
+    first_s: float | None
+    text: str
+    excluded: dict[int, float]
+    early_alarms: int
+    hours: float
+    alarms: int
+    base_first_s: float | None
+    stats: dict[str, int]
+
+
+def ins_flight(
+    case: Case | None, grade: str, receivers: int, seed: int, baseline: bool
+) -> InsOutcome:
+    """Simulate one approach with the fault of ``case`` (None: nominal) and run it."""
+    import companion.sim as sim
+    from companion.integrity.coast import CoastConfig
+    from companion.integrity.synthetic import run_samples_ins
+    from companion.nav.blend import BlendConfig
+    from companion.sim.scenarios import Event
+
+    logging.disable(logging.WARNING)
+    rng = np.random.default_rng(seed)
+    fault: Fault | None = None
+    events: tuple[Event, ...] = ()
+    t0 = 0.0
+    if case is not None:
+        t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
+        vec = direction(rng, case.axis)
+        if case.kind == "dither":
+            fault = Fault("dither", t0, tuple(vec), amplitude_m=case.size, period_s=20.0)
+            params: dict[str, object] = {
+                "amplitude_m": case.size,
+                "period_s": 20.0,
+                "axis_ned": tuple(vec),
+            }
+        else:
+            fault = Fault(case.kind, t0, tuple(vec * case.size))
+            key = "offset_ned_m" if case.kind == "step" else "rate_ned_mps"
+            params = {key: tuple(vec * case.size)}
+        events = (Event(case.kind, t0, t0 + 1000.0, params=params),)
+    scenario = sim.make_scenario(
+        "approach", imu_grade=grade, events=events, second_receiver=receivers == 2
+    )
+    flight = sim.simulate(scenario, seed=seed)
+    blend_cfg = BlendConfig.for_grade(grade)
+    coast_cfg = CoastConfig.for_grade(grade)
+    res = run_samples_ins(flight.samples, IntegrityMonitor(config()), blend_cfg, coast_cfg)
+    after = [a for a in res.alarms if a[0] >= t0]
+    base_first = None
+    if baseline:
+        base = run_samples_ins(
+            flight.samples, IntegrityMonitor(config()), blend_cfg, coast_cfg, use_coast=False
+        )
+        base_first = next((a[0] for a in base.alarms if a[0] >= t0), None)
+    hours = float(flight.truth.t_s[-1] - flight.truth.t_s[0]) / 3600.0
+    return InsOutcome(
+        fault,
+        after[0][0] if after else None,
+        after[0][2] if after else "",
+        dict(res.excluded_first_s),
+        len([a for a in res.alarms if a[0] < t0]),
+        hours,
+        len(res.alarms),
+        base_first,
+        dict(res.monitor.stats),
+    )
+
+
+def ins_sections(runs: int, hours: float, jobs: int, seed: int) -> None:
+    """Fault cases and nominal hours through blend + coast + monitor; prints the tables."""
+    approach_h = 228.0 / 3600.0
+    n_nom = max(1, math.ceil(hours / approach_h))
+    tasks: list[tuple[tuple[str, int], Case | None, int, bool]] = []
+    for r, (grade, rx) in enumerate(INS_ROWS):
+        for i, case in enumerate(INS_CASES):
+            for k in range(runs):
+                s = seed + 10_000 * (r + 1) + 100 * i + k
+                tasks.append(((grade, rx), case, s, grade == "tactical" and rx == 1))
+        for k in range(n_nom):
+            tasks.append(((grade, rx), None, seed + 10_000 * (r + 1) + 9_000 + k, False))
+    results: dict[tuple[str, int], list[tuple[Case | None, InsOutcome]]] = {
+        row: [] for row in INS_ROWS
+    }
+    t_start = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = {
+            pool.submit(ins_flight, case, row[0], row[1], s, base): (row, case)
+            for row, case, s, base in tasks
+        }
+        for done, fut in enumerate(as_completed(futures), 1):
+            row_key, fcase = futures[fut]
+            results[row_key].append((fcase, fut.result()))
+            if done % 10 == 0 or done == len(futures):
+                el = time.perf_counter() - t_start
+                print(f"ins flights {done}/{len(futures)}, {el:.0f} s", file=sys.stderr)
+    for grade, rx in INS_ROWS:
+        rows = []
+        attribution: dict[str, str] = {}
+        for case in INS_CASES:
+            mine, base = Tally(), Tally()
+            ex0 = ex1 = 0
+            for c, out in results[(grade, rx)]:
+                if c is not case or out.fault is None:
+                    continue
+                mine.add(out.fault, out.first_s, out.text)
+                base.add(out.fault, out.base_first_s)
+                ex0 += 0 in out.excluded
+                ex1 += 1 in out.excluded
+            rows.append((case, mine, base))
+            attribution[case.label] = f"rx0 {ex0}, rx1 {ex1}"
+        title = f"One RTK receiver + inertial reference, {grade} IMU (simulated approaches)"
+        if rx == 2:
+            title = f"Two RTK receivers + inertial reference, {grade} IMU (simulated approaches)"
+        if grade == "tactical" and rx == 1:
+            print_section(title + "; plain = the same flights without the reference", rows)
+        else:
+            print_section(title + "; plain column not run", rows)
+        if rx == 2:
+            print("  excluded by the end of the flight (runs): ", end="")
+            print("; ".join(f"{k}: {v}" for k, v in attribution.items()))
+        nom = [o for c, o in results[(grade, rx)] if c is None]
+        h = sum(o.hours for o in nom)
+        alarms = sum(o.alarms for o in nom)
+        early = sum(o.early_alarms for c, o in results[(grade, rx)] if c is not None)
+        fault_h = sum(
+            (o.fault.t_start_s - 10.0) / 3600.0
+            for c, o in results[(grade, rx)]
+            if c is not None and o.fault is not None
+        )
+        stats: dict[str, int] = {}
+        for o in nom:
+            for counter, v in o.stats.items():
+                stats[counter] = stats.get(counter, 0) + v
+        print(
+            f"  nominal: {len(nom)} flights, {h:.2f} h, alarms {alarms} ({alarms / h:.3f}/h); "
+            f"before fault onset in the fault runs: {early} alarms in {fault_h:.2f} h"
+        )
+        print(f"  monitor counters (nominal): {stats}")
+
+
+def coast_timing() -> None:
+    """Per-call cost of the inertial coast and of the monitor's separation with its
+    references, on a simulated tactical approach's samples (best of 3 passes)."""
+    import companion.sim as sim
+    from companion.integrity.coast import CoastConfig, InertialCoast
+    from companion.nav import earth
+    from companion.nav.navigator import GnssMeasurement
+    from companion.types import AttitudeSample, GnssFix, ImuSample
+
+    flight = sim.simulate(sim.make_scenario("approach", imu_grade="tactical"), seed=3)
+    fr = flight.frame
+    stream = [s for s in flight.samples if isinstance(s, ImuSample | AttitudeSample)]
+    n_imu = sum(isinstance(s, ImuSample) for s in stream)
+    fixes = [s for s in flight.samples if isinstance(s, GnssFix) and s.receiver_id == 0]
+    cfg = CoastConfig.for_grade("tactical")
+    g = earth.gravity_ned_mps2(fr.lat0_rad, fr.alt0_m)
+    atts = [s for s in stream if isinstance(s, AttitudeSample)]
+    best_imu = best_att = math.inf
+    for _ in range(3):  # the whole stream, less the attitude samples alone
+        c = InertialCoast(cfg, g)
+        t = time.perf_counter()
+        for s in stream:
+            if isinstance(s, ImuSample):
+                c.on_imu(s)
+            else:
+                c.on_attitude(s)
+        whole = time.perf_counter() - t
+        c = InertialCoast(cfg, g)
+        t = time.perf_counter()
+        for a in atts:
+            c.on_attitude(a)
+        att_only = time.perf_counter() - t
+        best_imu = min(best_imu, (whole - att_only) / n_imu)
+        best_att = min(best_att, att_only / len(atts))
+    # a run with anchors from the truth (the cost does not depend on the values), the
+    # references and fixes of the last 100 s kept for the monitor
+    c = InertialCoast(cfg, g)
+    t_end = flight.truth.t_s[-1]
+    fix_iter = iter(f for f in fixes if f.t_s > t_end - 100.0)
+    nxt = next(fix_iter, None)
+    cases: list[tuple[GnssFix, GnssMeasurement, dict[str, NavState]]] = []
+    nan3 = np.full(3, np.nan)
+    ref_times: list[float] = []
+    best_ref = math.inf
+    for s in stream:
+        if isinstance(s, AttitudeSample):
+            c.on_attitude(s)
+            continue
+        c.on_imu(s)
+        if c.anchor_due(s.t_s):
+            tr = flight.truth.at(s.t_s)
+            c.anchor(NavState(s.t_s, tr.pos_ned_m, tr.vel_ned_mps, np.eye(3) * 4e-4,
+                              np.eye(3) * 1e-4))  # fmt: skip
+        while nxt is not None and nxt.t_s <= s.t_s:
+            t = time.perf_counter()
+            refs = c.references(nxt.t_s)
+            ref_times.append(time.perf_counter() - t)
+            tr = flight.truth.at(nxt.t_s)
+            meas = GnssMeasurement(nxt.t_s, tr.pos_ned_m, np.full(3, 9e-4), nan3, nan3,
+                                   nxt.fix_type, 0)  # fmt: skip
+            cases.append((nxt, meas, dict(refs)))
+            nxt = next(fix_iter, None)
+    best_ref = float(np.median(ref_times))
+    n_slots = max(len(r) for _, _, r in cases)
+    best_due = math.inf
+    for _ in range(3):
+        t = time.perf_counter()
+        for f, _, _ in cases:
+            c.anchor_due(f.t_s)
+        best_due = min(best_due, (time.perf_counter() - t) / len(cases))
+    per_fix = {}
+    for label, with_refs in (("no references", False), (f"{n_slots} references", True)):
+        best = math.inf
+        for _ in range(3):
+            mon = IntegrityMonitor(config())
+            t = time.perf_counter()
+            for f, meas, fix_refs in cases:
+                mon.on_fix(f, meas, None, references=fix_refs if with_refs else None)
+            best = min(best, (time.perf_counter() - t) / len(cases))
+        per_fix[label] = best
+        if with_refs and mon.stats["fault_fixes"]:
+            print(f"  (timing run raised faults: {dict(mon.stats)})")
+    print("\nPer-call cost (tactical approach, default CoastConfig; best of 3, references: median)")
+    print(f"  InertialCoast.on_imu      {best_imu * 1e6:7.2f} us   (budget 5 us)")
+    print(f"  InertialCoast.on_attitude {best_att * 1e6:7.2f} us")
+    print(f"  InertialCoast.anchor_due  {best_due * 1e6:7.2f} us")
+    print(f"  InertialCoast.references  {best_ref * 1e6:7.2f} us   (budget 40 us), {n_slots} slots")
+    for label, v in per_fix.items():
+        print(f"  IntegrityMonitor.on_fix   {v * 1e6:7.1f} us   ({label})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=20, help="runs per fault case")
     parser.add_argument("--hours", type=float, default=10.0, help="nominal flight hours")
     parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--ins-runs", type=int, default=3, help="runs per case with the INS")
+    parser.add_argument(
+        "--ins-hours", type=float, default=0.5, help="nominal hours per INS row (3 rows)"
+    )
+    parser.add_argument("--jobs", type=int, default=2, help="processes for the INS flights")
+    parser.add_argument("--skip-ins", action="store_true", help="only the synthetic sections")
     args = parser.parse_args()
     logging.basicConfig(level=logging.ERROR)  # the monitor logs every fault it sees
     t0 = time.perf_counter()
@@ -304,6 +586,9 @@ def main() -> None:
     )
     print(f"  monitor counters: {stats}")
     sim_flights()
+    if not args.skip_ins:
+        ins_sections(args.ins_runs, args.ins_hours, args.jobs, args.seed)
+    coast_timing()
     print(f"\nwall time {time.perf_counter() - t0:.0f} s")
 
 

@@ -28,6 +28,21 @@ navigator that excludes the receiver). A navigator that fuses the receiver
 follows a slow ramp (its innovation stays small), which is why its own
 prediction is used only in the fix-level tests.
 
+An inertial reference (:class:`companion.integrity.coast.CoastState`) drifts:
+its separation series restarts when it re-anchors (a step at re-anchoring is
+not a fault), and its window tests account for its velocity and acceleration
+error (:class:`companion.integrity.separation.ReferenceDrift`). A separation
+that fails against a reference blames the receiver. Two receivers that
+disagree are told apart by their separations from third solutions (other
+receivers, references): the one that fails a test against a third solution
+while the other passes them all is the culprit; otherwise the fault stays
+unresolved until the evidence comes. While receivers disagree, a reference
+anchored less than one separation window before the disagreement was detected
+may carry the fault (it was anchored from the navigator fusing the faulty
+receiver) and does not count; and a reference that fails against a receiver the
+navigator does not fuse, while another receiver is in use, proves nothing about
+it (the reference carries the fused receiver's errors): the fault is unresolved.
+
 References
 ----------
 SEEDS.md S3 (solution separation, slope and residual tests), S0 (ellipsoid
@@ -47,6 +62,7 @@ import numpy as np
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
+from companion.integrity.coast import CoastState
 from companion.integrity.limits import (
     AlertLimit,
     ApproachCategory,
@@ -61,7 +77,7 @@ from companion.integrity.protection import (
     k_vertical,
     protection_levels,
 )
-from companion.integrity.separation import SeparationResult, SeparationTracker
+from companion.integrity.separation import ReferenceDrift, SeparationResult, SeparationTracker
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
 from companion.types import (
@@ -212,6 +228,9 @@ class IntegrityMonitor:
         self._pairs: dict[PairKey, SeparationTracker] = {}
         self._pair_last: dict[PairKey, SeparationResult] = {}
         self._pair_used: dict[PairKey, dict[int, float]] = {}
+        self._ref_anchor: dict[PairKey, float] = {}
+        self._episode_start_s: float | None = None
+        """When the current disagreement between receivers was first detected (None: none)."""
         self._unresolved_until_s = -math.inf
         self._unresolved_alerted = False
         self._fault_sep_h_m = 0.0
@@ -315,6 +334,8 @@ class IntegrityMonitor:
         culprits: set[int] = set()
         unresolved = False
 
+        if rx.last_meas is not None and rx.last_meas.fix_type != meas.fix_type:
+            self._restart_series(rid)
         sep_results = self._separations(meas, references or {})
         innov_failed, fix_reasons = self._fix_tests(meas, update, predicted)
         if update is not None and update.dof > 0 and math.isfinite(update.nis):
@@ -338,8 +359,22 @@ class IntegrityMonitor:
             self._fault_sep_h_m = max(self._fault_sep_h_m, float(np.hypot(*res.sep_ned_m[:2])))
             self._fault_sep_v_m = max(self._fault_sep_v_m, abs(float(res.sep_ned_m[2])))
             if key[1].startswith(_REF):
-                culprits.add(rid)
+                if rid in culprits or t < rx.excluded_until_s:
+                    culprits.add(rid)  # already found faulty: it stays excluded
+                elif update is None and self._other_receivers(rid, t):
+                    # the reference was anchored from the navigator, which fuses another
+                    # receiver: it may carry that one's fault; a disagreement, unresolved
+                    self.stats["reference_vs_unfused"] += 1
+                    unresolved = True
+                    if self._episode_start_s is None:
+                        self._episode_start_s = t
+                elif self._ref_trusted(key):
+                    culprits.add(rid)
+                else:
+                    self.stats["reference_untrusted"] += 1
                 continue
+            if self._episode_start_s is None:
+                self._episode_start_s = t
             a, b = int(key[0][2:]), int(key[1][2:])
             culprit = self._arbitrate(a, b, key, culprits)
             if culprit is None:
@@ -364,10 +399,36 @@ class IntegrityMonitor:
             self._fault_sep_h_m = self._fault_sep_v_m = 0.0
         if not reasons and t >= rx.excluded_until_s:
             rx.alerted = False
+        if self._episode_start_s is not None and not self.fault_detected:
+            self._episode_start_s = None
         self.last_check = FixCheck(
             t, rid, bool(reasons), tuple(reasons), tuple(sorted(culprits)), unresolved
         )
         return outputs
+
+    def _other_receivers(self, rid: int, t: float) -> bool:
+        """Is another receiver, not excluded, giving fixes (within one separation window)?"""
+        horizon = self.config.separation_window_s
+        return any(
+            qid != rid
+            and q.last_meas is not None
+            and t - q.last_meas.t_s <= horizon
+            and not t < q.excluded_until_s
+            for qid, q in self._rx.items()
+        )
+
+    def _restart_series(self, rid: int) -> None:
+        """Restart every separation series of receiver ``rid`` (its fix type changed).
+
+        The window tests assume one error process over the window; a change of fix type
+        (RTK fixed to float, float to 3-D, back) changes the receiver's error and its
+        stated accuracy at once, a jump that is not a fault (as S3 keeps one satellite set
+        per approach: a change causes jumps)."""
+        tag = f"rx{rid}"
+        for key, tracker in self._pairs.items():
+            if tag in key:
+                tracker.reset()
+        self.stats["series_restarted_fix_type"] += 1
 
     def _valid_meas(self, meas: GnssMeasurement) -> bool:
         return bool(
@@ -500,19 +561,61 @@ class IntegrityMonitor:
             if abs(dt) > cfg.pair_max_dt_s:
                 self.stats["reference_too_old"] += 1
                 continue
-            sep = meas.pos_ned_m - (ref.pos_ned_m + np.nan_to_num(ref.vel_ned_mps) * dt)
+            ref_vel = ref.vel_ned_mps
+            if not np.isfinite(ref_vel).all():
+                ref_vel = np.nan_to_num(ref_vel)
+            sep = meas.pos_ned_m - (ref.pos_ned_m + ref_vel * dt)
             cov = r_fix + ref.pos_cov_ned_m2 + ref.vel_cov_ned_m2ps2 * dt * dt
             key = (f"rx{rid}", _REF + name)
-            res = self._pair_update(key, t, sep, cov)
+            drift: ReferenceDrift | None = None
+            if isinstance(ref, CoastState):
+                drift = self._coast_drift(key, ref, meas)
+                if drift is None:
+                    continue
+            res = self._pair_update(key, t, sep, cov, drift)
             if res is not None:
                 results[key] = res
         return results
 
+    def _coast_drift(
+        self, key: PairKey, ref: CoastState, meas: GnssMeasurement
+    ) -> ReferenceDrift | None:
+        """The drift of an inertial reference for the window tests; restarts the pair's
+        series when the reference re-anchored. None (counted) when it is unusable."""
+        anchor = ref.anchor_t_s
+        if self._ref_anchor.get(key) != anchor:
+            if key in self._ref_anchor:
+                self.stats["reference_reanchored"] += 1
+            self._ref_anchor[key] = anchor
+            self._tracker(key).reset()
+        acc_cov = ref.acc_cov_ned_m2ps4
+        if acc_cov is None or not math.isfinite(ref.vrw_psd_m2ps3):
+            self.stats["bad_reference"] += 1
+            return None
+        w = self.config.separation_window_s
+        try:
+            return ReferenceDrift(
+                # the fix's variance plus the reference's velocity random walk integrated
+                # over one window (an upper bound of its variance about the window's line)
+                window_var_m2=meas.pos_var_ned_m2 + ref.vrw_psd_m2ps3 * w**3 / 3.0,
+                vel_var_m2ps2=np.diag(ref.vel_cov_ned_m2ps2).copy(),
+                acc_var_m2ps4=np.diag(acc_cov).copy(),
+            )
+        except ValueError as exc:
+            self.stats["bad_reference"] += 1
+            log.warning("reference %s at t=%.2f s skipped: %s", key[1], meas.t_s, exc)
+            return None
+
     def _pair_update(
-        self, key: PairKey, t: float, sep: FloatArray, cov: FloatArray
+        self,
+        key: PairKey,
+        t: float,
+        sep: FloatArray,
+        cov: FloatArray,
+        drift: ReferenceDrift | None = None,
     ) -> SeparationResult | None:
         try:
-            res = self._tracker(key).update(t, sep, cov)
+            res = self._tracker(key).update(t, sep, cov, drift)
         except ValueError as exc:
             self.stats["bad_separation"] += 1
             log.warning("separation %s-%s at t=%.2f s skipped: %s", key[0], key[1], t, exc)
@@ -523,26 +626,54 @@ class IntegrityMonitor:
                 self.stats[f"separation_{reason}"] += 1
         return res
 
+    def _ref_trusted(self, key: PairKey) -> bool:
+        """May the reference of ``key`` blame a receiver?
+
+        A reference anchored from the navigator while it fused a faulty receiver carries
+        that receiver's fault: against the good receiver it fails. So while receivers
+        disagree, a reference only counts if it was anchored at least one separation
+        window before the disagreement was first detected (the window tests look back
+        that far: the fault may have been present all that time). Without a receiver
+        disagreement (one receiver), every reference counts.
+        """
+        start = self._episode_start_s
+        anchor = self._ref_anchor.get(key)
+        if start is None or anchor is None:
+            return True
+        return anchor <= start - self.config.separation_window_s
+
     def _arbitrate(self, a: int, b: int, key: PairKey, culprits: set[int]) -> int | None:
-        """Which of two disagreeing receivers is faulty, or None when nothing tells."""
+        """Which of two disagreeing receivers is faulty, or None when nothing tells.
+
+        A receiver already blamed or excluded is the culprit. Otherwise each one's latest
+        separations (within one separation window) from third solutions (other receivers,
+        references) are scored by their largest test statistic over its threshold
+        (snapshot, slope, residual): the culprit is the one that fails a test against a
+        third solution (score > 1) while the other passes them all (score <= 1).
+        """
         for cid in (a, b):
             if cid in culprits or self.exclude(cid):
                 return cid
-        # a third solution: compare each receiver's separation from everything else
+        now = self._now_s if self._now_s is not None else -math.inf
+        horizon = self.config.separation_window_s
         score: dict[int, list[float]] = {a: [], b: []}
         for k, res in self._pair_last.items():
-            if k == key:
+            if k == key or now - res.t_s > horizon:
+                continue
+            if k[1].startswith(_REF) and not self._ref_trusted(k):
                 continue
             for cid in (a, b):
                 other = b if cid == a else a
                 if f"rx{cid}" in k and f"rx{other}" not in k:
-                    score[cid].append(res.snapshot_stat / res.snapshot_threshold)
+                    score[cid].append(_score(res))
         if not score[a] or not score[b]:
             return None
         sa, sb = max(score[a]), max(score[b])
-        if sa == sb:
-            return None
-        return a if sa > sb else b
+        if sa > 1.0 >= sb:
+            return a
+        if sb > 1.0 >= sa:
+            return b
+        return None
 
     def _exclude_receiver(self, rid: int, t: float, reasons: list[str]) -> list[Output]:
         rx = self._rx.setdefault(rid, _Receiver())
@@ -639,6 +770,12 @@ class IntegrityMonitor:
         self.stats["category_changes"] += 1
         severity = Severity.WARNING if avail < old else Severity.NOTICE
         return [Alert(t, AlertCode.CAT, severity, f"{_cat_name(old)} -> {_cat_name(avail)}")]
+
+
+def _score(res: SeparationResult) -> float:
+    """The largest of a separation's test statistics over their thresholds (> 1 fails)."""
+    ratios = [res.snapshot_stat / res.snapshot_threshold, res.slope_ratio, res.rss_ratio]
+    return max(r for r in ratios if math.isfinite(r))
 
 
 def _cat_name(cat: ApproachCategory) -> str:

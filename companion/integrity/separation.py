@@ -32,6 +32,26 @@ from 0 (white: S3's own formulas exactly) to 50 windows:
   ``g = tr(A^2)/tr(A)``, ``h = tr(A)^2/tr(A^2)``), which for white errors is
   ``chi2(n - 2)``.
 
+**Drifting references** (an inertial solution coasting from an anchor, see
+:mod:`companion.integrity.coast`). Their error is not a stationary process:
+it is the anchor's position error, plus its velocity error times the age, plus
+half the acceleration error times the age squared. Over one window this is an
+offset (no effect on the window tests), a slope, and a curvature. The caller
+gives a :class:`ReferenceDrift`; then
+
+* the series is normalised by the *window* sigma (the fix's variance plus the
+  reference's short-term noise), not by the absolute separation covariance,
+  which the offset dominates;
+* the slope test's variance adds the reference's velocity-error variance
+  ``sigma_v^2``: the fitted slope is the noise slope plus the reference's
+  velocity error, two independent Gaussians, so the threshold is
+  ``K_s sqrt(sigma_b^2 sigma_w^2 + sigma_v^2)`` (m/s), exact for the same ``P_s``;
+* the residual test bounds the curvature: the residual of ``a t^2 / 2`` about
+  the line has norm ``|a| / 2 ||M t^2||``, so by the triangle inequality
+  ``sqrt(RSS) <= sqrt(RSS_noise) + |a| / 2 ||M t^2|| / sigma_w``; with
+  ``RSS_noise`` at its ``P_r / 2`` threshold and ``|a| <= Phi^-1(1 - P_r / 4)
+  sigma_a`` the test keeps a false-alarm probability of at most ``P_r``.
+
 No threshold is a tuned literal: each comes from a false-alarm probability,
 the window length and the sampling.
 
@@ -154,6 +174,74 @@ def thresholds_regular(
 
 
 @dataclass(frozen=True, slots=True)
+class ReferenceDrift:
+    """What a drifting reference adds to the window tests, per NED axis (see module docstring).
+
+    ``window_var_m2`` (3,): variance of the separation without the reference's drift
+    (the fix's variance plus the reference's short-term noise over a window), m^2.
+    ``vel_var_m2ps2`` (3,): variance of the reference's velocity error, m^2/s^2.
+    ``acc_var_m2ps4`` (3,): variance of its acceleration error, m^2/s^4.
+    """
+
+    window_var_m2: FloatArray
+    vel_var_m2ps2: FloatArray
+    acc_var_m2ps4: FloatArray
+
+    def __post_init__(self) -> None:
+        w, v, a = self.window_var_m2, self.vel_var_m2ps2, self.acc_var_m2ps4
+        if np.shape(w) != (3,) or np.shape(v) != (3,) or np.shape(a) != (3,):
+            raise ValueError("drift variances must be (3,) each")
+        vals = [*np.asarray(w).tolist(), *np.asarray(v).tolist(), *np.asarray(a).tolist()]
+        if not (math.isfinite(sum(vals)) and min(vals) >= 0.0 and min(vals[:3]) > 0.0):
+            raise ValueError("drift variances must be finite, >= 0 (window_var_m2 > 0)")
+
+
+def curvature_residual_norm_s2(t_s: FloatArray) -> float:
+    """``||M t^2||`` (s^2): the norm of the residual of ``t^2`` about its least-squares line
+    over the window times ``t_s`` (n,). A quadratic ``a t^2 / 2`` leaves ``|a| / 2`` times it.
+    """
+    t = np.asarray(t_s, dtype=float)
+    tc = t - t.mean()
+    u = tc * tc
+    sxx = float(tc @ tc)
+    if sxx <= 0.0:
+        raise ValueError("window times must not all be equal")
+    r = u - u.mean() - tc * (float(tc @ u) / sxx)
+    return float(math.sqrt(float(r @ r)))
+
+
+def _mahalanobis3(
+    s0: float, s1: float, s2: float,
+    c00: float, c01: float, c02: float, c11: float, c12: float, c22: float,
+) -> float:  # fmt: skip
+    """``s^T C^-1 s`` for a symmetric (3, 3) ``C`` (upper triangle given) by its Cholesky
+    factor, in floats (the per-fix path); ``ValueError`` when ``C`` is not positive definite.
+    """
+    if c00 <= 0.0:
+        raise ValueError("separation covariance not positive definite")
+    l00 = math.sqrt(c00)
+    l10, l20 = c01 / l00, c02 / l00
+    d1 = c11 - l10 * l10
+    if d1 <= 0.0:
+        raise ValueError("separation covariance not positive definite")
+    l11 = math.sqrt(d1)
+    l21 = (c12 - l20 * l10) / l11
+    d2 = c22 - l20 * l20 - l21 * l21
+    if d2 <= 0.0:
+        raise ValueError("separation covariance not positive definite")
+    w0 = s0 / l00
+    w1 = (s1 - l10 * w0) / l11
+    w2 = (s2 - l20 * w0 - l21 * w1) / math.sqrt(d2)
+    return w0 * w0 + w1 * w1 + w2 * w2
+
+
+@functools.lru_cache(maxsize=256)
+def _curvature_regular(n: int, dt_ms: int) -> float:
+    """:func:`curvature_residual_norm_s2` for ``n`` samples ``dt_ms`` apart (cached)."""
+    return curvature_residual_norm_s2(np.arange(n, dtype=float) * (dt_ms * 1e-3))
+
+
+@dataclass(frozen=True, slots=True)
 class SeparationResult:
     """The tests of one pair at one epoch.
 
@@ -217,6 +305,8 @@ class SeparationTracker:
         self.p_slope = slope_false_alarm_prob
         self.p_rss = residual_false_alarm_prob
         self.snapshot_threshold = float(chi2.isf(snapshot_false_alarm_prob, 3))
+        self._k_acc = float(norm.isf(0.25 * residual_false_alarm_prob))
+        """Bound on a drifting reference's acceleration error, in sigmas (two-sided P_r / 2)."""
         self._cap = 256
         self._t = np.zeros(self._cap)
         self._z = np.zeros((self._cap, 3))
@@ -265,8 +355,19 @@ class SeparationTracker:
         """Time of the newest sample, None when empty."""
         return float(self._t[self._end - 1]) if self._end > self._start else None
 
-    def update(self, t_s: float, sep_ned_m: FloatArray, cov_ned_m2: FloatArray) -> SeparationResult:
+    def update(
+        self,
+        t_s: float,
+        sep_ned_m: FloatArray,
+        cov_ned_m2: FloatArray,
+        drift: ReferenceDrift | None = None,
+    ) -> SeparationResult:
         """Add one separation (m, (3,)) with its covariance (m^2, (3, 3)) and test.
+
+        ``drift``: the reference's drift when one side is a drifting (inertial)
+        solution (module docstring); the window is then normalised by its
+        ``window_var_m2`` and the thresholds account for the drift. A tracker is fed
+        either always or never with a drift.
 
         A non-finite or non-positive-definite input raises ``ValueError`` (the
         monitor rejects and counts such pairs before calling).
@@ -275,15 +376,12 @@ class SeparationTracker:
         cov = np.asarray(cov_ned_m2, dtype=float)
         if sep.shape != (3,) or cov.shape != (3, 3):
             raise ValueError("sep_ned_m must be (3,) and cov_ned_m2 (3, 3)")
-        if not (np.all(np.isfinite(sep)) and np.all(np.isfinite(cov))):
+        s0, s1, s2 = sep.tolist()
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = cov.tolist()
+        if not math.isfinite(s0 + s1 + s2 + float(cov.sum())):
             raise ValueError("separation or covariance not finite")
-        try:
-            chol = np.linalg.cholesky(cov)
-        except np.linalg.LinAlgError as exc:
-            raise ValueError("separation covariance not positive definite") from exc
-        white = np.linalg.solve(chol, sep)
-        snap = float(white @ white)
-        sigma = np.sqrt(np.diag(cov))
+        snap = _mahalanobis3(s0, s1, s2, c00, c01, c02, c11, c12, c22)
+        sigma = np.sqrt(np.diag(cov) if drift is None else np.asarray(drift.window_var_m2))
         last = self.last_t_s
         if last is not None and t_s <= last:
             self.reset()  # time went backwards or repeated: restart the series
@@ -301,29 +399,28 @@ class SeparationTracker:
         t = self._t[self._start : self._end]
         if n >= self.min_points and (t[-1] - t[0]) >= 0.5 * self.window_s:
             z = self._z[self._start : self._end]
-            th = self._thresholds(t)
-            tc = t - t.mean()
+            tc = t - float(t.sum()) / n
             sxx = float(tc @ tc)
             b = (tc @ z) / sxx
-            resid = z - z.mean(axis=0) - np.outer(tc, b)
-            rss = np.sum(resid * resid, axis=0)
-            mean_sigma = self._sigma[self._start : self._end].mean(axis=0)
+            # RSS about the line: sum (z - mean)^2 - b^2 sxx, per axis
+            zc = z - z.sum(axis=0) / n
+            rss = np.maximum(np.einsum("ij,ij->j", zc, zc) - b * b * sxx, 0.0)
+            mean_sigma = self._sigma[self._start : self._end].sum(axis=0) / n
             slope_mps = b * mean_sigma
-            ratios_s = np.abs(b) / th.slope_threshold_per_s
-            ratios_r = rss / th.rss_threshold
+            slope_th_mps, rss_th = self.window_thresholds(t, mean_sigma, drift)
+            ratios_s = np.abs(slope_mps) / slope_th_mps
+            ratios_r = rss / rss_th
             slope_ratio = float(ratios_s.max())
             rss_ratio = float(ratios_r.max())
             if slope_ratio > 1.0:
                 i = int(np.argmax(ratios_s))
                 reasons.append(
                     f"slope {AXES[i]} {100.0 * slope_mps[i]:.1f} cm/s > "
-                    f"{100.0 * th.slope_threshold_per_s * mean_sigma[i]:.1f}"
+                    f"{100.0 * slope_th_mps[i]:.1f}"
                 )
             if rss_ratio > 1.0:
                 i = int(np.argmax(ratios_r))
-                reasons.append(
-                    f"residual {AXES[i]} rss {rss[i]:.0f} > {th.rss_threshold:.0f} sigma2"
-                )
+                reasons.append(f"residual {AXES[i]} rss {rss[i]:.0f} > {rss_th[i]:.0f} sigma2")
         return SeparationResult(
             t_s=float(t_s),
             sep_ned_m=sep,
@@ -336,11 +433,45 @@ class SeparationTracker:
             reasons=tuple(reasons),
         )
 
-    def _thresholds(self, t: FloatArray) -> WindowThresholds:
+    def window_thresholds(
+        self, t_s: FloatArray, sigma_m: FloatArray, drift: ReferenceDrift | None = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Per-axis thresholds of the window tests for a window at times ``t_s`` (n,).
+
+        Returns the slope threshold (m/s, (3,)) for the fitted slope in metres per
+        second, and the residual threshold (in units of the window sigma squared,
+        (3,)) for the residual sum of squares of ``s / sigma``; ``sigma_m`` (3,) is
+        the window sigma per axis (the series is normalised by it). See the module
+        docstring for the derivation, with and without a drifting reference.
+        """
+        t = np.asarray(t_s, dtype=float)
+        sig = np.asarray(sigma_m, dtype=float)
+        regular = self._regular(t)
+        if drift is None:
+            th = self._thresholds(t, self.p_rss, regular)
+            return th.slope_threshold_per_s * sig, np.full(3, th.rss_threshold)
+        th = self._thresholds(t, 0.5 * self.p_rss, regular)
+        k_s = th.slope_threshold_per_s / th.slope_sigma_per_s
+        slope_th = k_s * np.sqrt(
+            (th.slope_sigma_per_s * sig) ** 2 + np.asarray(drift.vel_var_m2ps2)
+        )
+        norm_t2 = _curvature_regular(t.size, regular) if regular else curvature_residual_norm_s2(t)
+        curv = 0.5 * self._k_acc * np.sqrt(np.asarray(drift.acc_var_m2ps4)) * norm_t2 / sig
+        return slope_th, (math.sqrt(th.rss_threshold) + curv) ** 2
+
+    @staticmethod
+    def _regular(t: FloatArray) -> int:
+        """The spacing in ms when the window is regular enough for the cached thresholds,
+        else 0."""
         n = t.size
-        dt = np.diff(t)
         mean_dt = float(t[-1] - t[0]) / (n - 1)
-        if np.all(np.abs(dt - mean_dt) <= REGULAR_SPACING_TOLERANCE * mean_dt):
-            dt_ms = max(1, round(mean_dt * 1e3))
-            return thresholds_regular(n, dt_ms, self.p_slope, self.p_rss)
-        return thresholds_for_times(t, self.p_slope, self.p_rss)
+        dt = t[1:] - t[:-1]
+        tol = REGULAR_SPACING_TOLERANCE * mean_dt
+        if float(dt.max()) - mean_dt <= tol and mean_dt - float(dt.min()) <= tol:
+            return max(1, round(mean_dt * 1e3))
+        return 0
+
+    def _thresholds(self, t: FloatArray, p_rss: float, dt_ms: int) -> WindowThresholds:
+        if dt_ms:
+            return thresholds_regular(t.size, dt_ms, self.p_slope, p_rss)
+        return thresholds_for_times(t, self.p_slope, p_rss)

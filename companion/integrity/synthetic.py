@@ -32,17 +32,22 @@ import numpy as np
 from scipy.stats import chi2
 
 from companion.engine import gnss_measurement
+from companion.integrity.coast import CoastConfig, CoastState, InertialCoast
 from companion.integrity.monitor import IntegrityMonitor
+from companion.nav import earth
+from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
-from companion.nav.navigator import GnssMeasurement, GnssUpdate
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
 from companion.types import (
     Alert,
     AlertCode,
+    AttitudeSample,
     FixType,
     FloatArray,
     GnssFix,
+    ImuSample,
     LandedState,
     LandedStateSample,
     NavMode,
@@ -201,6 +206,78 @@ class CvKalman:
         return GnssUpdate(meas.t_s, True, nis, 3, self.gate, innov, s_cov)
 
 
+class SyntheticReference:
+    """Inertial-coast-like references without an IMU: truth plus the coast's error model.
+
+    ``slots`` anchors staggered over ``life_s`` (as :class:`InertialCoast`); at each
+    anchor a position error, a velocity error and a constant acceleration error are
+    drawn from the stated 1-sigmas (per axis, independent), and the slot's error at
+    age ``tau`` is ``dp0 + dv0 tau + a tau^2 / 2``, with the covariance the coast
+    reports (:class:`CoastState`). The anchors do not depend on the receivers (an
+    ideal navigator): this exercises the monitor's drift-aware tests and attribution
+    at the cost of the synthetic approaches.
+
+    References
+    ----------
+    :mod:`companion.integrity.coast` (error model and covariance).
+    """
+
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        anchor_sigma_pos_m: float = 0.02,
+        anchor_sigma_vel_mps: float = 0.005,
+        acc_sigma_mps2: tuple[float, float, float] = (3e-4, 3e-4, 3e-4),
+        slots: int = 6,
+        life_s: float = 60.0,
+    ) -> None:
+        if slots < 1 or not life_s > 0.0:
+            raise ValueError("slots must be >= 1 and life_s > 0")
+        self.rng = rng
+        self.sp = anchor_sigma_pos_m
+        self.sv = anchor_sigma_vel_mps
+        self.sa = np.asarray(acc_sigma_mps2, dtype=float)
+        self.slots = slots
+        self.life_s = life_s
+        self._t0: float | None = None
+        self._anchor: list[tuple[float, FloatArray, FloatArray, FloatArray] | None] = [None] * slots
+
+    def at(
+        self, t_s: float, pos_ned_m: FloatArray, vel_ned_mps: FloatArray, hold: bool = False
+    ) -> dict[str, NavState]:
+        """The slots' references at ``t_s`` given the truth there (re-anchoring due slots,
+        unless ``hold``: the engine does not re-anchor while the monitor reports a fault)."""
+        if self._t0 is None:
+            self._t0 = t_s
+        out: dict[str, NavState] = {}
+        sp2, sv2 = self.sp**2, self.sv**2
+        s_a = np.diag(self.sa**2)
+        for i in range(self.slots):
+            a = self._anchor[i]
+            if not hold and (
+                (a is None and t_s >= self._t0 + i * self.life_s / self.slots)
+                or (a is not None and t_s - a[0] >= self.life_s)
+            ):
+                a = (
+                    t_s,
+                    self.rng.normal(0.0, self.sp, 3),
+                    self.rng.normal(0.0, self.sv, 3),
+                    self.rng.normal(0.0, 1.0, 3) * self.sa,
+                )
+                self._anchor[i] = a
+            if a is None:
+                continue
+            tau = t_s - a[0]
+            err_p = a[1] + a[2] * tau + 0.5 * a[3] * tau * tau
+            err_v = a[2] + a[3] * tau
+            pos_cov = np.eye(3) * (sp2 + tau * tau * sv2) + s_a * (0.25 * tau**4)
+            vel_cov = np.eye(3) * sv2 + s_a * (tau * tau)
+            out[f"ins{i}"] = CoastState(
+                t_s, pos_ned_m + err_p, vel_ned_mps + err_v, pos_cov, vel_cov, None, a[0], s_a, 0.0
+            )
+        return out
+
+
 @dataclass(frozen=True, slots=True)
 class RunResult:
     """What one synthetic run gives the scorer.
@@ -269,6 +346,7 @@ def run_approach(
     t_from_s: float = 0.0,
     baseline_false_alarm_prob: float | None = None,
     t_offset_s: float = 0.0,
+    reference: SyntheticReference | None = None,
 ) -> RunResult:
     """Fly one approach through :class:`CvKalman` and ``monitor`` (and the plain baseline).
 
@@ -276,7 +354,8 @@ def run_approach(
     monitor is reset first. The engine's rule is followed: fixes of an excluded
     receiver are not offered to the navigator, but still go to the monitor. The
     baseline has its own navigator with the same fusion policy and no exclusions (what a
-    system with only the innovation test would fly).
+    system with only the innovation test would fly). ``reference``: inertial-like
+    references given to the monitor with every fix.
     """
     cfg = monitor.config
     p_fa = cfg.false_alarm_prob if baseline_false_alarm_prob is None else baseline_false_alarm_prob
@@ -301,6 +380,11 @@ def run_approach(
         tk = float(t[k])
         outputs: list[Output] = []
         fused_one = False
+        refs = (
+            None
+            if reference is None
+            else reference.at(tk, pos[k], vel[k], hold=monitor.fault_detected)
+        )
         for rid in range(spec.receivers):
             p_fix = fixes[rid][k]
             meas = GnssMeasurement(tk, p_fix, var, nan3, nan3, mode.fix_type, rid)
@@ -314,7 +398,7 @@ def run_approach(
                 if high and not base_high[rid]:
                     base_alerts.append(tk)
                 base_high[rid] = high
-            outputs += monitor.on_fix(gfix, meas, update)
+            outputs += monitor.on_fix(gfix, meas, update, references=refs)
         p_nav, v_nav, p_cov, v_cov = nav.predict(tk)
         sol = NavSolution(
             t_s=tk,
@@ -444,3 +528,135 @@ def run_samples(
         alerts += [o for o in outs if isinstance(o, Alert)]
     alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
     return SampleRunResult(alarms, tuple(alerts), monitor)
+
+
+@dataclass(frozen=True, slots=True)
+class InsRunResult:
+    """Alarms of :func:`run_samples_ins` (as :class:`SampleRunResult`), the exclusions seen
+    (receiver id -> first time it was excluded), and the monitor and coast after the run."""
+
+    alarms: tuple[tuple[float, str, str], ...]
+    alerts: tuple[Alert, ...]
+    excluded_first_s: dict[int, float]
+    monitor: IntegrityMonitor
+    coast: InertialCoast
+
+
+def run_samples_ins(
+    samples: Sequence[Sample],
+    monitor: IntegrityMonitor,
+    blend_config: BlendConfig,
+    coast_config: CoastConfig,
+    publish_rate_hz: float = 10.0,
+    use_bias_estimate: bool = True,
+    use_coast: bool = True,
+) -> InsRunResult:
+    """Drive the GNSS/INS blend, the inertial coast and the monitor with a flight's samples.
+
+    The engine's rules, without the engine: the blend fuses the first receiver not
+    excluded (the primary); every fix goes to the monitor with the coast's references
+    at the fix time; a slot is re-anchored from the blend's state at its newest IMU
+    time (and its accelerometer-bias estimate and covariance when
+    ``use_bias_estimate``) when due, but not while the monitor reports a fault; a
+    solution is published at ``publish_rate_hz`` on the fix clock. ``use_coast``
+    False gives the same run without references (the baseline).
+    """
+    frame: LocalFrame | None = None
+    nav: BlendNavigator | None = None
+    coast: InertialCoast | None = None
+    pending: list[Sample] = []
+    landed: LandedState | None = None
+    alerts: list[Alert] = []
+    excluded: dict[int, float] = {}
+    tick = -1
+    last_t: dict[int, float] = {}
+    monitor.reset()
+    for sample in samples:
+        if isinstance(sample, LandedStateSample):
+            landed = sample.landed_state
+            continue
+        if frame is None:
+            if isinstance(sample, GnssFix) and int(sample.fix_type) >= int(FixType.FIX_3D):
+                frame = LocalFrame(sample.lat_rad, sample.lon_rad, sample.alt_msl_m)
+                nav = BlendNavigator(blend_config, frame)
+                coast = InertialCoast(
+                    coast_config, earth.gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
+                )
+                for old in pending:  # the last history_s of IMU and attitude
+                    _feed_ins(old, nav, coast)
+            elif isinstance(sample, ImuSample | AttitudeSample):
+                pending.append(sample)
+                while pending[0].t_s < sample.t_s - blend_config.history_s:
+                    pending.pop(0)
+                continue
+            else:
+                continue
+        if nav is None or coast is None or frame is None:
+            continue
+        if isinstance(sample, ImuSample | AttitudeSample):
+            _feed_ins(sample, nav, coast)
+            if (
+                isinstance(sample, ImuSample)
+                and nav.initialised
+                and not monitor.fault_detected
+                and coast.anchor_due(nav.imu_t_s)
+            ):
+                state = nav.predict(nav.imu_t_s)
+                if state is not None:
+                    if use_bias_estimate:
+                        cov = nav.covariance
+                        coast.anchor(state, nav.biases[0], cov[9:12, 9:12])
+                    else:
+                        coast.anchor(state)
+            continue
+        if not isinstance(sample, GnssFix) or int(sample.fix_type) < int(FixType.FIX_3D):
+            continue
+        meas = gnss_measurement(sample, frame)
+        rid = sample.receiver_id
+        last_t[rid] = sample.t_s
+        primary = min(
+            (r for r in last_t if not monitor.exclude(r) and sample.t_s - last_t[r] < 1.0),
+            default=None,
+        )
+        update: GnssUpdate | None = None
+        if rid == primary:
+            update = nav.on_gnss(meas, gate=nav.initialised)
+        refs = coast.references(sample.t_s) if use_coast else None
+        outs = monitor.on_fix(sample, meas, update, references=refs)
+        for r in list(last_t):
+            if monitor.exclude(r) and r not in excluded:
+                excluded[r] = sample.t_s
+        k = math.floor(sample.t_s * publish_rate_hz + 1e-6)
+        if k > tick and nav.initialised:
+            tick = k
+            state = nav.predict(max(sample.t_s, nav.imu_t_s))
+            if state is not None:
+                lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
+                sol = NavSolution(
+                    t_s=state.t_s,
+                    lat_rad=lat,
+                    lon_rad=lon,
+                    alt_msl_m=alt,
+                    vel_ned_mps=state.vel_ned_mps,
+                    pos_cov_ned_m2=state.pos_cov_ned_m2,
+                    vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
+                    yaw_rad=None,
+                    mode=NavMode.NORMAL,
+                    fix_type=sample.fix_type,
+                    satellites=sample.satellites or 0,
+                )
+                outs += monitor.on_solution(sol, landed)
+        alerts += [o for o in outs if isinstance(o, Alert)]
+    if coast is None:
+        coast = InertialCoast(coast_config, earth.gravity_ned_mps2(0.0, 0.0))
+    alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
+    return InsRunResult(alarms, tuple(alerts), excluded, monitor, coast)
+
+
+def _feed_ins(sample: Sample, nav: BlendNavigator, coast: InertialCoast) -> None:
+    if isinstance(sample, ImuSample):
+        nav.on_imu(sample)
+        coast.on_imu(sample)
+    elif isinstance(sample, AttitudeSample):
+        nav.on_attitude(sample, 0.0)
+        coast.on_attitude(sample)

@@ -40,3 +40,26 @@ def test_nominal_flight_raises_no_fault_or_integrity_alert() -> None:
     res = run_samples(flight.samples, IntegrityMonitor())
     assert res.alarms == ()
     assert res.monitor.stats["fault_fixes"] == 0
+
+
+def test_one_receiver_with_the_inertial_coast_catches_the_ramp_flight_before_1m() -> None:
+    """S3's 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
+    inertial coast's references catch it before it reaches 1 m; nothing before."""
+    from companion.integrity.coast import CoastConfig
+    from companion.integrity.synthetic import run_samples_ins
+    from companion.nav.blend import BlendConfig
+
+    flight = sim.simulate(sim.make_scenario("ramp_fault", second_receiver=False), seed=1)
+    (event,) = [e for e in flight.events if e.kind == "ramp"]
+    blend, coast = BlendConfig.for_grade("tactical"), CoastConfig.for_grade("tactical")
+    res = run_samples_ins(flight.samples, IntegrityMonitor(), blend, coast)
+    assert not [a for a in res.alarms if a[0] < event.t_start_s], res.alarms
+    after = [a for a in res.alarms if a[0] >= event.t_start_s]
+    assert after and "ref:ins" in after[0][2]
+    rate = abs(event.params["rate_ned_mps"][2])
+    assert rate * (after[0][0] - event.t_start_s) < 1.0
+    assert res.excluded_first_s.get(0) == after[0][0]
+    # the same flight without the references: the blend follows the ramp, nothing is seen
+    # before it has grown past a metre
+    base = run_samples_ins(flight.samples, IntegrityMonitor(), blend, coast, use_coast=False)
+    assert not [a for a in base.alarms if a[0] < event.t_start_s + 1.0 / rate]

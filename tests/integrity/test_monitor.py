@@ -7,10 +7,12 @@ import math
 import numpy as np
 import pytest
 
+from companion.integrity.coast import CoastState
 from companion.integrity.limits import ApproachCategory, FlightPhase
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.integrity.phase import PhaseConfig
-from companion.integrity.synthetic import ApproachSpec, Fault, run_approach
+from companion.integrity.separation import SeparationResult
+from companion.integrity.synthetic import ApproachSpec, Fault, SyntheticReference, run_approach
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.types import (
@@ -286,3 +288,145 @@ def test_ramp_on_a_navigator_fusing_both_receivers_is_not_pinned_on_the_good_one
     res = run((Fault("ramp", 40.0, (0.0, 0.0, 0.04)),), fuse_all=True)
     assert res.first_alert_s is not None and 0.04 * (res.first_alert_s - 40.0) < 1.0
     assert not res.monitor.exclude(1)
+
+
+# ----------------------------------------------------------------------------- inertial references
+
+
+def coast_ref(t: float, pos: np.ndarray, anchor_t: float, sigma_v: float = 0.01) -> CoastState:
+    tau = t - anchor_t
+    s_a = np.eye(3) * 1e-8
+    return CoastState(
+        t, pos, np.zeros(3), np.eye(3) * (0.02**2 + (sigma_v * tau) ** 2),
+        np.eye(3) * sigma_v**2, None, anchor_t, s_a, 0.0,
+    )  # fmt: skip
+
+
+def test_a_reanchored_reference_restarts_its_series() -> None:
+    """A slot that drifted 60 cm (inside its covariance) re-anchors back onto the truth:
+    the step is not a fault. Without the restart the window sees a 60 cm jump."""
+
+    def run(reanchor: bool) -> IntegrityMonitor:
+        mon = IntegrityMonitor(cat2_config())
+        for k in range(300):
+            t = 0.1 * k
+            jumped_at = 20.0 if t >= 20.0 else 0.0
+            drift = 0.03 * (t - jumped_at)  # 3 cm/s, as its velocity sigma allows
+            anchored_at = jumped_at if reanchor else 0.0
+            ref = coast_ref(t, np.array([0.0, 0.0, drift]), anchored_at, sigma_v=0.03)
+            mon.on_fix(fix(t), meas(t, np.zeros(3)), None, references={"ins0": ref})
+        return mon
+
+    good = run(reanchor=True)
+    assert good.stats["reference_reanchored"] == 1
+    assert good.stats["fault_fixes"] == 0 and not good.exclude(0)
+    bad = run(reanchor=False)  # the same jump without a new anchor time is a fault
+    assert bad.stats["fault_fixes"] > 0
+
+
+def test_reference_drift_within_its_velocity_sigma_is_no_slope_fault() -> None:
+    """A 5 cm/s drift of a reference whose velocity sigma is 2 cm/s passes; the same
+    series from a reference that claims no velocity error fails the slope test."""
+    outcome = {}
+    for sigma_v in (0.02, 1e-4):
+        mon = IntegrityMonitor(cat2_config())
+        for k in range(200):
+            t = 0.1 * k
+            ref = coast_ref(t, np.array([0.0, 0.0, 0.05 * t]), 0.0, sigma_v)
+            m = meas(t, np.zeros(3), sigma=0.03)
+            mon.on_fix(fix(t), m, None, references={"ins0": ref})
+        outcome[sigma_v] = mon.stats["separation_slope"]
+    assert outcome[0.02] == 0 and outcome[1e-4] > 0
+
+
+def run_ref(faults: tuple[Fault, ...], receivers: int, seed: int, **ref_kw: object):  # noqa: ANN201
+    spec = ApproachSpec(receivers=receivers, faults=faults)
+    rng = np.random.default_rng(seed)
+    ref = SyntheticReference(np.random.default_rng(seed + 100), **ref_kw)  # type: ignore[arg-type]
+    t0 = faults[0].t_start_s if faults else 0.0
+    return run_approach(spec, IntegrityMonitor(cat2_config()), rng, t_from_s=t0, reference=ref)
+
+
+def test_one_receiver_with_an_inertial_reference_catches_a_4cm_ramp_before_1m() -> None:
+    for seed in range(2):
+        res = run_ref((Fault("ramp", 40.0, (0.0, 0.0, 0.04)),), 1, seed)
+        assert res.first_alert_s is not None and 0.04 * (res.first_alert_s - 40.0) < 1.0
+        assert not [a for a in res.alerts if a < 40.0]
+        assert res.baseline_first_s is None  # the navigator follows the ramp
+        assert res.monitor.exclude(0)
+    res = run_ref((Fault("dither", 40.0, (0.0, 0.0, 1.0), amplitude_m=1.0),), 1, 5)
+    assert res.first_alert_s is not None and res.first_alert_s - 40.0 < 5.0
+
+
+def test_one_receiver_with_an_inertial_reference_raises_nothing_nominally() -> None:
+    for seed in range(3):
+        res = run_ref((), 1, seed)
+        assert res.alerts == ()
+        assert res.monitor.stats["reference_reanchored"] > 0
+
+
+def test_two_receivers_and_a_reference_exclude_the_ramping_receiver() -> None:
+    """The receiver pair detects the ramp first (unresolved: nothing yet tells which);
+    a reference anchored well before (a sharp one: 1e-4 m/s^2 of acceleration error) then
+    pins it on rx0; rx1 is never excluded."""
+    for seed in range(3):
+        res = run_ref((Fault("ramp", 40.0, (0.0, 0.0, 0.04)),), 2, seed, acc_sigma_mps2=(1e-4,) * 3)
+        assert res.first_alert_s is not None and 0.04 * (res.first_alert_s - 40.0) < 1.0
+        mon = res.monitor
+        assert mon.exclude(0) and not mon.exclude(1)
+        assert "rx1 excluded" not in " ".join(str(a) for a in res.alerts)
+
+
+def test_arbitration_needs_a_failed_test_against_a_third_solution() -> None:
+    mon = IntegrityMonitor(cat2_config())
+    mk = lambda t, fail: SeparationResult(  # noqa: E731
+        t, np.zeros(3), 40.0 if fail else 1.0, 35.4, np.zeros(3), math.nan, math.nan, 1, ()
+    )
+    mon._now_s = 10.0
+    key = ("rx0", "rx1")
+    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert mon._arbitrate(0, 1, key, set()) == 0
+    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, False), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert mon._arbitrate(0, 1, key, set()) is None  # both consistent: nothing tells
+    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, True)}
+    assert mon._arbitrate(0, 1, key, set()) is None  # both fail: the reference may be off
+    mon._pair_last = {("rx0", "ref:ins0"): mk(-5.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert mon._arbitrate(0, 1, key, set()) is None  # stale evidence does not count
+
+
+def test_a_reference_anchored_on_the_faulty_receiver_does_not_blame_the_good_one() -> None:
+    """rx0 ramps from 40 s; a reference re-anchored at 42 s from a navigator that followed
+    rx0 carries its ramp and disagrees with rx1. It was anchored less than one window
+    before the receivers' disagreement was detected, and rx1 is not the fused receiver:
+    it does not count, rx1 stays in (the fault is unresolved)."""
+    mon = IntegrityMonitor(cat2_config())
+    rng = np.random.default_rng(3)
+    rate = np.array([0.0, 0.0, 0.04])
+    for k in range(1, 900):
+        t = 0.1 * k
+        ramp = rate * max(t - 40.0, 0.0)
+        anchor_t = 42.0 if t >= 42.0 else 0.0
+        ref_err = rate * 2.0 + rate * (t - 42.0) if t >= 42.0 else np.zeros(3)
+        ref = coast_ref(t, ref_err, anchor_t, sigma_v=0.005)
+        for rid in (0, 1):
+            pos = rng.normal(0.0, 0.01, 3) + (ramp if rid == 0 else 0.0)
+            mon.on_fix(fix(t, rid), meas(t, pos, rid), None, references={"ins0": ref})
+        assert not mon.exclude(1), t
+    assert mon.fault_unresolved
+    assert mon.stats["reference_untrusted"] + mon.stats["reference_vs_unfused"] > 0
+
+
+def test_a_fix_type_change_restarts_the_receivers_series() -> None:
+    mon = IntegrityMonitor(cat2_config())
+    key = ("rx0", "ref:ins0")
+    for k in range(60):
+        t = 0.1 * k
+        m = meas(t, np.zeros(3))
+        if k >= 50:  # RTK fixed -> float
+            m = GnssMeasurement(t, m.pos_ned_m, np.full(3, 0.3**2), m.vel_ned_mps,
+                                m.vel_var_ned_m2ps2, FixType.RTK_FLOAT, 0)  # fmt: skip
+        mon.on_fix(fix(t), m, None, references={"ins0": coast_ref(t, np.zeros(3), 0.0)})
+        if k == 49:
+            assert mon._pair_last[key].window_points == 50
+    assert mon.stats["series_restarted_fix_type"] == 1
+    assert mon._pair_last[key].window_points == 10

@@ -9,8 +9,11 @@ import pytest
 from scipy.stats import chi2, norm
 
 from companion.integrity.separation import (
+    ReferenceDrift,
     SeparationTracker,
+    _mahalanobis3,
     _tau_grid,
+    curvature_residual_norm_s2,
     thresholds_for_times,
     thresholds_regular,
 )
@@ -176,3 +179,70 @@ def test_fast_traces_match_the_direct_generalised_chi_square() -> None:
         h = np.trace(a) ** 2 / np.trace(a @ a)
         best = max(best, g * chi2.isf(1e-5, h))
     assert th.rss_threshold == pytest.approx(best, rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- drifting refs
+
+
+@pytest.mark.parametrize(
+    ("sigma_v", "sigma_a"),
+    [(0.005, 1e-4), (0.02, 1e-3), (0.002, 5e-3)],
+    ids=["small", "vel", "acc"],
+)
+def test_drift_aware_thresholds_hold_their_false_alarm_rate(sigma_v: float, sigma_a: float) -> None:
+    """Separation = receiver noise (Gauss-Markov) + an inertial reference's drift over the
+    window (velocity error times t plus half the acceleration error times t^2): the slope
+    and residual tests with the drift terms keep their false-alarm probability; without
+    them (the plain thresholds) the drift alone trips them."""
+    rng = np.random.default_rng(int(sigma_v * 1e4) + int(sigma_a * 1e5))
+    n_win = 20_000
+    t = np.arange(50) * 0.2
+    sig_w = 0.03
+    z = gm_windows(rng, n_win, t, 30.0)
+    v = rng.normal(0.0, sigma_v, n_win)
+    a = rng.normal(0.0, sigma_a, n_win)
+    s = sig_w * z + v[:, None] * t[None, :] + 0.5 * a[:, None] * t[None, :] ** 2
+    b, rss = window_stats(s / sig_w, t)
+    slope_mps = b * sig_w
+    tracker = SeparationTracker(10.0, 5, 1e-7, P_TEST, P_TEST)
+    drift = ReferenceDrift(
+        window_var_m2=np.full(3, sig_w**2),
+        vel_var_m2ps2=np.full(3, sigma_v**2 + (sigma_a * t.mean()) ** 2),
+        acc_var_m2ps4=np.full(3, sigma_a**2),
+    )
+    slope_th, rss_th = tracker.window_thresholds(t, np.full(3, sig_w), drift)
+    sd = math.sqrt(P_TEST / n_win)
+    fa_slope = float(np.mean(np.abs(slope_mps) > slope_th[0]))
+    fa_rss = float(np.mean(rss > rss_th[0]))
+    assert fa_slope <= P_TEST + 4 * sd
+    assert fa_rss <= P_TEST + 4 * sd
+    # the slope test stays tight (the sum of two Gaussians is exact, up to the worst-case tau)
+    assert fa_slope >= 0.1 * P_TEST
+    plain_slope, plain_rss = tracker.window_thresholds(t, np.full(3, sig_w))
+    fa_plain = max(
+        float(np.mean(np.abs(slope_mps) > plain_slope[0])), float(np.mean(rss > plain_rss[0]))
+    )
+    assert fa_plain > 2 * P_TEST
+
+
+def test_curvature_residual_norm_closed_form() -> None:
+    # t^2 about its line on n evenly spaced points: W^2 sqrt(n / 180) asymptotically
+    t = np.linspace(0.0, 10.0, 2001)
+    assert curvature_residual_norm_s2(t) == pytest.approx(100.0 * math.sqrt(2001 / 180.0), rel=1e-3)
+    with pytest.raises(ValueError):
+        curvature_residual_norm_s2(np.zeros(4))
+    with pytest.raises(ValueError):
+        ReferenceDrift(np.zeros(3), np.zeros(3), np.zeros(3))
+
+
+def test_float_mahalanobis_matches_numpy() -> None:
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3))
+        c = a @ a.T + 0.01 * np.eye(3)
+        s = rng.normal(size=3)
+        want = float(s @ np.linalg.solve(c, s))
+        got = _mahalanobis3(*s, c[0, 0], c[0, 1], c[0, 2], c[1, 1], c[1, 2], c[2, 2])
+        assert got == pytest.approx(want, rel=1e-9)
+    with pytest.raises(ValueError):
+        _mahalanobis3(1.0, 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0, 1.0)  # indefinite
