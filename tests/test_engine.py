@@ -155,3 +155,37 @@ def test_bad_config_is_rejected_with_the_key():
     with pytest.raises(ValueError, match="publish_rate_hz"):
         EngineConfig(publish_rate_hz=0.0)
     assert math.isfinite(EngineConfig().publish_rate_hz)
+
+
+def test_gnss_back_beyond_the_gate_reinitialises_instead_of_bridging_forever():
+    """Without an IMU, a 20 s gap during which the fixes move 500 m off the carried line
+    (a turn the pass-through cannot know): every returning fix fails the gate. The engine
+    must re-initialise from GNSS after ``reacquire_max_rejects`` fixes and say GNSS_BACK,
+    not stay in BRIDGING with the receiver excluded for disagreeing with a stale guess."""
+    from dataclasses import replace as dc_replace
+
+    from companion.types import GnssFix, ImuSample
+
+    line = Line()
+
+    def shifted(stream):
+        for s in stream:
+            if isinstance(s, ImuSample):
+                continue
+            if isinstance(s, GnssFix) and s.t_s - 10.0 >= 30.0:
+                n, e, d = ORIGIN.lla_to_ned(s.lat_rad, s.lon_rad, s.alt_msl_m)
+                lat, lon, alt = ORIGIN.ned_to_lla(np.array([n, e + 500.0, d]))
+                s = dc_replace(s, lat_rad=lat, lon_rad=lon, alt_msl_m=alt)
+            yield s
+
+    engine = Engine(EngineConfig(navigator="passthrough"))
+    _, outs = run(shifted(line_stream(45.0, line=line, gaps=((10.0, 30.0),))), engine)
+    back = alerts(outs, AlertCode.GNSS_BACK)
+    assert back, "never re-acquired"
+    assert 30.0 <= back[0].t_s - 10.0 < 30.0 + 0.1 * 30
+    assert engine.monitor.mode is NavMode.NORMAL
+    last = solutions(outs)[-1]
+    err = ORIGIN.lla_to_ned(last.lat_rad, last.lon_rad, last.alt_msl_m) - (
+        line.pos_ned_m(last.t_s) + np.array([0.0, 500.0, 0.0])
+    )
+    assert np.linalg.norm(err) < 0.5

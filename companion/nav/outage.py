@@ -38,6 +38,8 @@ from companion.types import Alert, AlertCode, FixType, GnssFix, NavMode, Severit
 log = logging.getLogger(__name__)
 
 RTK_TYPES = (FixType.RTK_FLOAT, FixType.RTK_FIXED)
+_OUTAGE_MODES = (NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING)
+"""Modes after GNSS was lost and before it is trusted again."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -169,9 +171,9 @@ class OutageMonitor:
         alerts += self._downgrade_alerts(rx, fix, ftype)
         if self.mode is NavMode.INIT:
             return FixAssessment(True, "first_fix", False, False, tuple(alerts))
-        reinit = (
-            self.mode is NavMode.REACQUIRING and self._gated_rejects >= cfg.reacquire_max_rejects
-        )
+        # fixes rejected since the outage, whether or not one has been fused since: when
+        # GNSS returns and the prediction has drifted beyond the gate, no fix ever passes
+        reinit = self.mode in _OUTAGE_MODES and self._gated_rejects >= cfg.reacquire_max_rejects
         if reinit:
             alerts.append(
                 Alert(
@@ -187,7 +189,7 @@ class OutageMonitor:
         """The navigator's verdict on a usable fix; returns mode-change alerts."""
         alerts: list[Alert] = []
         if not fused:
-            if self.mode is NavMode.REACQUIRING:
+            if self.mode in _OUTAGE_MODES:
                 self._gated_rejects += 1
                 self._gated_ok = 0
             return alerts
@@ -212,13 +214,18 @@ class OutageMonitor:
             self._set_mode(self._good_mode())
         return alerts
 
-    def reinitialised(self, t_s: float) -> None:
-        """The engine re-initialised the navigator from a fix."""
+    def reinitialised(self, t_s: float) -> list[Alert]:
+        """The engine re-initialised the navigator from a fix; GNSS_BACK if it ends an outage."""
+        alerts: list[Alert] = []
+        if self.mode in _OUTAGE_MODES and self.outage_start_t_s is not None:
+            text = f"after {t_s - self.outage_start_t_s:.1f} s (re-initialised)"
+            alerts.append(Alert(t_s, AlertCode.GNSS_BACK, Severity.NOTICE, text))
         self.last_fused_t_s = t_s
         self._gated_ok = 0
         self._gated_rejects = 0
         self.outage_start_t_s = None
         self._set_mode(self._good_mode())
+        return alerts
 
     # ------------------------------------------------------------------ clock
 
@@ -237,6 +244,7 @@ class OutageMonitor:
                 Alert(t_s, AlertCode.GNSS_LOST, Severity.WARNING, f"{reason} {silent_s:.1f} s")
             )
             alerts.append(Alert(t_s, AlertCode.BRIDGING, Severity.WARNING, "position carried"))
+            self._gated_rejects = 0
             self._set_mode(NavMode.BRIDGING)
         if self.mode in (NavMode.BRIDGING, NavMode.REACQUIRING) and silent_s > cfg.max_bridge_s:
             alerts.append(
