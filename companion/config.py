@@ -24,12 +24,14 @@ from pathlib import Path
 from typing import Any
 
 from companion.engine import EngineConfig
+from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
 from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
+from companion.nav.potential import PotentialConfig
 
 
 class ConfigError(ValueError):
@@ -111,6 +113,10 @@ class Config:
     """The GNSS/INS blend; its noise defaults are a typical autopilot MEMS IMU's (for a
     tactical-grade IMU, see sitl_fixtures/tactical.toml)."""
     integrity: IntegrityConfig = field(default_factory=IntegrityConfig)
+    potential: PotentialConfig = field(default_factory=PotentialConfig)
+    coast: CoastConfig = field(default_factory=lambda: CoastConfig.for_grade("mems"))
+    """The coasting inertial references (``engine.inertial_reference``): the IMU grade's
+    figures; sitl_fixtures/tactical.toml has the tactical grade's."""
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
 
@@ -263,6 +269,31 @@ def _toml_value(value: Any) -> str:
     return repr(value)
 
 
+def _numpydoc_attributes(doc: str) -> dict[str, str]:
+    """The ``Attributes`` section of a numpydoc class docstring, by attribute name
+    (``a, b : float`` documents both)."""
+    lines = inspect.cleandoc(doc).splitlines()
+    docs: dict[str, str] = {}
+    try:
+        start = next(
+            i + 2
+            for i, line in enumerate(lines[:-1])
+            if line.strip() == "Attributes" and set(lines[i + 1].strip()) == {"-"}
+        )
+    except StopIteration:
+        return docs
+    names: list[str] = []
+    for line in lines[start:]:
+        if line and not line.startswith(" "):
+            if " : " not in line:
+                break  # the next section's title
+            names = [n.strip() for n in line.split(" : ")[0].split(",")]
+            continue
+        for name in names:
+            docs[name] = (docs.get(name, "") + "\n" + line.strip()).strip()
+    return docs
+
+
 def _attribute_docs(cls: type) -> dict[str, str]:
     """Attribute docstrings (the string literal under each field) of a dataclass."""
     try:
@@ -270,7 +301,7 @@ def _attribute_docs(cls: type) -> dict[str, str]:
     except (OSError, TypeError):
         return {}
     tree = ast.parse(inspect.cleandoc("\n" + source) if source.startswith(" ") else source)
-    docs: dict[str, str] = {}
+    docs = _numpydoc_attributes(cls.__doc__ or "")
     body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
     for prev, node in zip(body, body[1:], strict=False):
         if (

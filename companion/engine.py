@@ -26,20 +26,34 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.stats import chi2
 
+from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
+from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, wrap_2pi
 from companion.nav.heading import HeadingConfig, HeadingCorrector
 from companion.nav.motion import SingerConfig, SingerNavigator
-from companion.nav.navigator import GnssMeasurement, Navigator, NavState
+from companion.nav.navigator import (
+    GnssMeasurement,
+    Navigator,
+    NavState,
+    rotation_between_frames,
+)
 from companion.nav.outage import OutageConfig, OutageMonitor
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
+from companion.nav.potential import (
+    PotentialConfig,
+    PotentialFilter,
+    PotentialPrediction,
+    combine_with_ins,
+)
 from companion.types import (
     Alert,
     AlertCode,
@@ -98,6 +112,29 @@ class EngineConfig:
     primary_receiver: int = 0
     """The receiver fused normally; the other is fused only while this one is unusable
     (and is always the integrity monitor's independent solution)."""
+    potential_bridge: bool = True
+    """Without an IMU stream, carry the solution through GNSS gaps (BRIDGING) with the
+    position-potential filter (S0) instead of the pass-through's constant velocity."""
+    potential_combine: bool = False
+    """With an IMU stream, publish through gaps the INS and potential predictions combined
+    by their covariances, their shared last-fix error as cross-covariance. On straight
+    approach gaps of 5-20 s it is 0.68-0.99 of the better of the two alone
+    (bench/potential.py part B; as a pseudo-measurement in the blend it was worse); but in
+    a minute of turns without GNSS the potential prediction is kilometres off with a
+    covariance that does not say so, and the combination follows it (cruise_gnss_loss):
+    off by default until its covariance is honest beyond its calibration horizon."""
+    inertial_reference: bool = False
+    """With the blend, keep free-inertial solutions coasting from staggered anchors
+    (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's
+    references: they do not contain the receivers' recent fixes, so a slow vertical ramp or
+    a sub-metre dither shows against them even with one receiver (S3's separation set).
+    Worth its cost (about 0.3 ms per fix) with a tactical IMU; a MEMS IMU drifts too fast
+    to catch anything the innovation test misses (bench/integrity.py)."""
+    potential_fix_test: bool = False
+    """Test each fix of the fused receiver against the potential prediction's ellipsoid
+    (S0) in the integrity monitor. Off by default: the prediction has no acceleration,
+    so the test trips at manoeuvre onsets (turns, rotation) where the blend's innovation
+    test, with the IMU, does not."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.publish_rate_hz <= 50.0:
@@ -177,12 +214,17 @@ class Engine:
         heading: HeadingConfig | None = None,
         blend: BlendConfig | None = None,
         integrity: IntegrityConfig | None = None,
+        potential: PotentialConfig | None = None,
+        coast: CoastConfig | None = None,
     ) -> None:
         self.config = config or EngineConfig()
         self._outage_config = outage or OutageConfig()
         self._heading_config = heading or HeadingConfig()
         self._blend_config = blend or BlendConfig.for_grade("mems")
         self._integrity_config = integrity or IntegrityConfig()
+        self._potential_config = potential or PotentialConfig()
+        self._coast_config = coast or CoastConfig.for_grade("mems")
+        self._combine_threshold = float(chi2.isf(self._potential_config.false_alarm_prob, 3))
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
@@ -213,6 +255,23 @@ class Engine:
         self._last_imu_t_s = -math.inf
         self.monitor = OutageMonitor(self._outage_config)
         self.integrity = IntegrityMonitor(self._integrity_config)
+        cfg = self.config
+        self._potential_used = (
+            cfg.potential_bridge or cfg.potential_combine or cfg.potential_fix_test
+        )
+        self.potential: PotentialFilter | None = None
+        """S0's filter on the fused fixes, when one of its uses is configured: the no-IMU
+        bridge, a second opinion beside the INS through gaps, the ellipsoid test of a fix.
+        Fed at every fix only for the fix test; for the bridges alone it is built when a
+        gap starts from the last ``window_s`` of fused fixes (``_recent_fixes``): the
+        same state, without fitting alpha and G every few seconds of flight for nothing."""
+        self._recent_fixes: deque[GnssMeasurement] = deque()
+        self._potential_gap = False
+        """The potential filter is ready for this gap (cleared by the next fused fix)."""
+        self._potential_disagrees = False
+        """The potential and INS predictions failed their consistency test in this gap."""
+        self.coast: InertialCoast | None = None
+        """The free-inertial references (with the blend, once the frame exists)."""
         self._landed: LandedState | None = None
         self._airborne = False
         self._speed_mps: float | None = None
@@ -269,6 +328,8 @@ class Engine:
         if self.primary is not None:
             self.primary.on_imu(sample)
             self._last_imu_t_s = sample.t_s
+            if self.coast is not None:
+                self.coast.on_imu(sample)
         return []
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
@@ -277,6 +338,8 @@ class Engine:
             self.heading.on_attitude(sample)
         if self.primary is not None:
             self.primary.on_attitude(sample, self.heading.correction_rad)
+            if self.coast is not None:
+                self.coast.on_attitude(sample, self.heading.correction_rad)
         return []
 
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
@@ -360,23 +423,29 @@ class Engine:
         if self.frame is None:  # _anchor sets it; keeps mypy honest
             raise ValueError("no local frame after anchoring")
         meas = gnss_measurement(fix, self.frame)
+        refs = self.coast.references(meas.t_s) if self.coast is not None else None
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{fix.receiver_id}_monitored"] += 1
-            outputs += self.integrity.on_fix(fix, meas, None)
+            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
         if self.integrity.exclude(fix.receiver_id):
             self.stats.gnss["excluded"] += 1
-            outputs += self.integrity.on_fix(fix, meas, None)
+            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
         if verdict.reinitialise:
             for nav in self._navigators():
                 nav.reset()
                 nav.on_gnss(meas, gate=False)
-            self.monitor.reinitialised(fix.t_s)
+            self._recent_fixes.clear()
+            if self.potential is not None:
+                self.potential.reset()
+            self._potential_add(meas)
+            outputs += self.monitor.reinitialised(fix.t_s)
             self.stats.gnss["reinitialised"] += 1
             self._last_fused_fix = fix
             return outputs
+        predicted = self._potential_reference(meas.t_s)
         update = self.fallback.on_gnss(meas, gate=verdict.gate)
         if self.primary is not None:
             primary_update = self.primary.on_gnss(
@@ -388,9 +457,16 @@ class Engine:
             self.stats.gnss["fused"] += 1
             self._last_fused_fix = fix
             self._satellites = fix.satellites or 0
+            self._potential_add(meas)
         else:
             self.stats.gnss["gate_rejected" if update.reason == "gate" else update.reason] += 1
-        outputs += self.integrity.on_fix(fix, meas, update)
+        # after a gap the navigator's prediction, not the receiver, is what is uncertain: a
+        # failed innovation then is the outage logic's (gate, reacquire, re-initialise), and
+        # must not exclude the receiver (which would stop the re-initialisation forever)
+        bridged = verdict.gate and self.monitor.mode in _GAP_MODES
+        outputs += self.integrity.on_fix(
+            fix, meas, None if bridged else update, predicted=predicted, references=refs
+        )
         if update.fused or update.reason == "gate":
             outputs += self.monitor.gate_result(fix.t_s, update.fused)
         return outputs
@@ -425,17 +501,109 @@ class Engine:
         )
         return primary_down
 
+    def _potential_add(self, meas: GnssMeasurement) -> None:
+        """A fused fix becomes a source of the potential field (refitted when due)."""
+        self._potential_gap = False
+        if not self._potential_used:
+            return
+        if self.config.potential_fix_test:
+            if self.potential is None:
+                self.potential = PotentialFilter(self._potential_config)
+            self.potential.add_fix(meas.t_s, meas.pos_ned_m, meas.pos_var_ned_m2, meas.vel_ned_mps)
+            return
+        recent = self._recent_fixes
+        recent.append(meas)
+        horizon_s = self._potential_config.window_s
+        while recent and meas.t_s - recent[0].t_s > horizon_s:
+            recent.popleft()
+
+    def _potential_for_gap(self) -> PotentialFilter | None:
+        """The potential filter at the start of a gap, alpha and G refitted on the fixes
+        just before it (built from the recent fixes unless it is fed at every fix)."""
+        if not self.config.potential_fix_test and self._recent_fixes:
+            pot = PotentialFilter(self._potential_config)
+            for m in self._recent_fixes:
+                pot.add_fix(m.t_s, m.pos_ned_m, m.pos_var_ned_m2, m.vel_ned_mps)
+            self.potential = pot
+        if self.potential is not None:
+            self.potential.refit(force=True)
+        return self.potential
+
+    def _potential_reference(self, t_s: float) -> NavState | None:
+        """The potential prediction at a new fix's time, for the monitor's ellipsoid test
+        (None until its covariance is calibrated by a first fit)."""
+        pot = self.potential
+        if pot is None or not self.config.potential_fix_test:
+            return None
+        if not pot.calibrated or pot.t_last_s is None:
+            return None
+        if t_s <= pot.t_last_s:
+            return None
+        return _potential_state(pot.predict(t_s))
+
+    def _bridge(self, state: NavState, t_s: float) -> NavState:
+        """The published state through a GNSS gap: the potential filter's without an IMU,
+        optionally combined with the INS's with one (EngineConfig.potential_*)."""
+        if self.monitor.mode not in (NavMode.BRIDGING, NavMode.LOST):
+            return state
+        no_imu = self.navigator is self.fallback
+        if not (self.config.potential_bridge if no_imu else self.config.potential_combine):
+            return state
+        if not self._potential_gap:
+            self._potential_gap = True
+            self._potential_disagrees = False
+            self._potential_for_gap()
+        pot = self.potential
+        if pot is None or pot.t_last_s is None or t_s < pot.t_last_s:
+            return state
+        pred = pot.predict(t_s)
+        if no_imu:
+            return _potential_state(pred, state.yaw_rad)
+        if self._potential_disagrees:
+            return state  # once they disagreed in this gap, the INS alone to its end
+        pos, cov, chi2_ = combine_with_ins(
+            state.pos_ned_m, state.pos_cov_ned_m2, pred, self._combine_threshold
+        )
+        if chi2_ > self._combine_threshold:
+            self._potential_disagrees = True
+            log.info(
+                "t=%.2f s: potential prediction disagrees with the INS (chi2 %.1f)", t_s, chi2_
+            )
+            return state
+        return replace(state, pos_ned_m=pos, pos_cov_ned_m2=cov)
+
     def _anchor(self, frame: LocalFrame) -> None:
         self.frame = frame
         for nav in self._navigators():
             nav.shift_frame(frame, frame)  # the blend takes its gravity model from the frame
+        if self.primary is not None and self.config.inertial_reference:
+            gravity = gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
+            self.coast = InertialCoast(self._coast_config, gravity)
+
+    def _anchor_coast(self) -> None:
+        """Re-anchor a due coasting slot from the blend at its newest IMU time, only while
+        the blend fuses trusted GNSS (never from a solution a fault may have pulled)."""
+        coast, blend = self.coast, self.primary
+        if coast is None or not isinstance(blend, BlendNavigator) or self.navigator is not blend:
+            return
+        if self.monitor.mode is not NavMode.NORMAL or self.integrity.fault_detected:
+            return
+        t_s = blend.imu_t_s
+        if not coast.anchor_due(t_s):
+            return
+        state = blend.predict(t_s)
+        if state is not None:
+            bias_b_mps2, _ = blend.biases
+            coast.anchor(state, bias_b_mps2, blend.covariance[9:12, 9:12])
 
     # ------------------------------------------------------------------ publication
 
     def _state_now(self, t_s: float) -> NavState | None:
         if not self.navigator.initialised:
             return None
-        return self.navigator.predict(max(t_s, self.now_s or t_s))
+        t_s = max(t_s, self.now_s or t_s)
+        state = self.navigator.predict(t_s)
+        return None if state is None else self._bridge(state, t_s)
 
     def _publish(self, now_s: float) -> list[Output]:
         # the solution is carried to the next whole millisecond: GLOBAL_POSITION_INT's
@@ -446,6 +614,7 @@ class Engine:
         if state is None or self.frame is None:
             return []
         self._speed_mps = float(np.hypot(state.vel_ned_mps[0], state.vel_ned_mps[1]))
+        self._anchor_coast()
         if self._maybe_reanchor(state):
             state = self._state_now(t_s)
             if state is None:  # shifting a state never uninitialises it; keeps mypy honest
@@ -476,6 +645,7 @@ class Engine:
                 NamedValue(t_s, "CMP_HACC", solution.h_acc_m),
                 NamedValue(t_s, "CMP_VACC", solution.v_acc_m),
                 NamedValue(t_s, "CMP_OUTG", self.monitor.outage_s(t_s)),
+                *(self.potential.outputs(t_s) if self.potential is not None else []),
             ]
         return outputs
 
@@ -506,10 +676,22 @@ class Engine:
         for nav in self._navigators():
             nav.shift_frame(self.frame, new)
         self.integrity.shift_frame(self.frame, new)
+        if self.coast is not None:
+            offset = new.lla_to_ned(self.frame.lat0_rad, self.frame.lon0_rad, self.frame.alt0_m)
+            self.coast.shift_frame(rotation_between_frames(self.frame, new), offset)
+        self._recent_fixes.clear()
+        if self.potential is not None:
+            self.potential.reset()  # its window of fixes is in the old frame: refills in seconds
         self.frame = new
         self.stats.reanchors += 1
         log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
         return True
+
+
+def _potential_state(pred: PotentialPrediction, yaw_rad: float | None = None) -> NavState:
+    return NavState(
+        pred.t_s, pred.pos_ned_m, pred.vel_ned_mps, pred.cov_ned_m2, pred.vel_cov_ned_m2ps2, yaw_rad
+    )
 
 
 def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavSolution:
@@ -521,6 +703,9 @@ def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavS
         cov[axis, axis] = max(cov[axis, axis], floor**2)
     return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
 
+
+_GAP_MODES = frozenset({NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING})
+"""Outage modes in which the navigator has been carried without GNSS."""
 
 _TICK_S = 0.05
 """Outage-clock resolution: GNSS_LOST is raised within this of its timeout."""

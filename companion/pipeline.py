@@ -73,7 +73,15 @@ class Pipeline:
         self.config = config or Config()
         self.decoder = Decoder(self.config.decoder)
         cfg = self.config
-        self.engine = Engine(cfg.engine, cfg.outage, cfg.heading, cfg.blend, cfg.integrity)
+        self.engine = Engine(
+            cfg.engine,
+            cfg.outage,
+            cfg.heading,
+            cfg.blend,
+            cfg.integrity,
+            cfg.potential,
+            cfg.coast,
+        )
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()
         self.rates = RateMonitor(self.config.streams.rates_hz())
@@ -92,6 +100,7 @@ class Pipeline:
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
             return frames
+        handle = self.engine.handle
         for sample in samples:
             kind = type(sample)
             if kind is HeartbeatSample:
@@ -100,9 +109,10 @@ class Pipeline:
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
-            outputs = self.engine.handle(sample)
-            for out in outputs:
-                frames += self._encode(out)
+            outputs = handle(sample)
+            if outputs:
+                for out in outputs:
+                    frames += self._encode(out)
             if kind is HeadingCommand:
                 frames += self._acknowledge(msg, sample, outputs)  # type: ignore[arg-type]
         t_s = samples[-1].t_s
@@ -151,8 +161,9 @@ class Pipeline:
         return [self._pack(m) for m in self.encoder.encode(out, self.decoder.flavour)]
 
     def _pack(self, msg: Any) -> bytes:
-        self.stats.messages_out += 1
-        self.stats.out_by_type[msg.get_type()] += 1
+        stats = self.stats
+        stats.messages_out += 1
+        stats.out_by_type[msg._type] += 1
         return self.encoder.pack(msg)
 
     def _on_autopilot_heartbeat(self, hb: HeartbeatSample) -> list[bytes]:

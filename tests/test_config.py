@@ -75,3 +75,27 @@ def test_example_config_is_the_current_template():
 
     example = Path(__file__).resolve().parent.parent / "systemd" / "companion.toml"
     assert example.read_text().strip() == template().strip()
+
+
+def test_tactical_fixture_config_is_the_tactical_grade():
+    """sitl_fixtures/tactical.toml spells out the tactical grade's figures for the blend and
+    the coasting references: they must be the grade profile's, not a copy that drifted."""
+    from pathlib import Path
+
+    from companion.integrity.coast import CoastConfig
+    from companion.nav.blend import BlendConfig
+
+    path = Path(__file__).resolve().parent.parent / "sitl_fixtures" / "tactical.toml"
+    cfg = load_config(path)
+    assert cfg.coast == CoastConfig.for_grade("tactical")
+    grade = BlendConfig.for_grade("tactical")
+    for key in ("accel_vrw_mps_rts", "gyro_arw_rad_rts", "accel_bias_sigma_mps2"):
+        assert getattr(cfg.blend, key) == pytest.approx(getattr(grade, key), rel=1e-12), key
+    assert cfg.engine.inertial_reference
+
+
+def test_numpydoc_attributes_document_template_keys():
+    """Blocks documented numpydoc-style (an Attributes section) still get per-key comments."""
+    text = template()
+    block = text.split("[potential]")[1].split("\n[")[0]
+    assert "# Span of past fixes" in block
