@@ -429,6 +429,24 @@ def run_approach(
     )
 
 
+def _solution(state: NavState, frame: LocalFrame, fix: GnssFix) -> NavSolution:
+    """The navigator's state published as the engine would in normal mode."""
+    lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
+    return NavSolution(
+        t_s=state.t_s,
+        lat_rad=lat,
+        lon_rad=lon,
+        alt_msl_m=alt,
+        vel_ned_mps=state.vel_ned_mps,
+        pos_cov_ned_m2=state.pos_cov_ned_m2,
+        vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
+        yaw_rad=None,
+        mode=NavMode.NORMAL,
+        fix_type=fix.fix_type,
+        satellites=fix.satellites or 0,
+    )
+
+
 def _is_alarm(alert: Alert) -> bool:
     """A FAULT alert, or an INTEGRITY alert that announces a loss (not a restoration)."""
     if alert.code is AlertCode.FAULT:
@@ -510,21 +528,7 @@ def run_samples(
             tick = k
             state = nav.predict(sample.t_s)
             if state is not None:
-                lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
-                sol = NavSolution(
-                    t_s=sample.t_s,
-                    lat_rad=lat,
-                    lon_rad=lon,
-                    alt_msl_m=alt,
-                    vel_ned_mps=state.vel_ned_mps,
-                    pos_cov_ned_m2=state.pos_cov_ned_m2,
-                    vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
-                    yaw_rad=None,
-                    mode=NavMode.NORMAL,
-                    fix_type=sample.fix_type,
-                    satellites=sample.satellites or 0,
-                )
-                outs += monitor.on_solution(sol, landed)
+                outs += monitor.on_solution(_solution(state, frame, sample), landed)
         alerts += [o for o in outs if isinstance(o, Alert)]
     alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
     return SampleRunResult(alarms, tuple(alerts), monitor)
@@ -631,21 +635,7 @@ def run_samples_ins(
             tick = k
             state = nav.predict(max(sample.t_s, nav.imu_t_s))
             if state is not None:
-                lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
-                sol = NavSolution(
-                    t_s=state.t_s,
-                    lat_rad=lat,
-                    lon_rad=lon,
-                    alt_msl_m=alt,
-                    vel_ned_mps=state.vel_ned_mps,
-                    pos_cov_ned_m2=state.pos_cov_ned_m2,
-                    vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
-                    yaw_rad=None,
-                    mode=NavMode.NORMAL,
-                    fix_type=sample.fix_type,
-                    satellites=sample.satellites or 0,
-                )
-                outs += monitor.on_solution(sol, landed)
+                outs += monitor.on_solution(_solution(state, frame, sample), landed)
         alerts += [o for o in outs if isinstance(o, Alert)]
     if coast is None:
         coast = InertialCoast(coast_config, earth.gravity_ned_mps2(0.0, 0.0))
