@@ -117,12 +117,12 @@ class EngineConfig:
     position-potential filter (S0) instead of the pass-through's constant velocity."""
     potential_combine: bool = False
     """With an IMU stream, publish through gaps the INS and potential predictions combined
-    by their covariances, their shared last-fix error as cross-covariance. On straight
-    approach gaps of 5-20 s it is 0.68-0.99 of the better of the two alone
-    (bench/potential.py part B; as a pseudo-measurement in the blend it was worse); but in
-    a minute of turns without GNSS the potential prediction is kilometres off with a
-    covariance that does not say so, and the combination follows it (cruise_gnss_loss):
-    off by default until its covariance is honest beyond its calibration horizon."""
+    by their covariances (their shared last-fix error as cross-covariance) while the two
+    agree (:func:`companion.nav.potential.combine_with_ins`). bench/potential.py part B,
+    RTK-fixed flights: 0.66-0.99 of the better of the two alone, approaches and turning
+    cruises; as a pseudo-measurement in the blend it was worse. But on the bundled
+    cruise_gnss_loss flight (MEMS, a minute of turns) it is worse than the INS alone
+    (mean 3.2 m against 2.9 m): off by default."""
     inertial_reference: bool = False
     """With the blend, keep free-inertial solutions coasting from staggered anchors
     (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's
