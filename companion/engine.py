@@ -46,7 +46,7 @@ from companion.nav.navigator import (
     NavState,
     rotation_between_frames,
 )
-from companion.nav.outage import OutageConfig, OutageMonitor
+from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.nav.potential import (
     PotentialConfig,
@@ -463,7 +463,7 @@ class Engine:
         # after a gap the navigator's prediction, not the receiver, is what is uncertain: a
         # failed innovation then is the outage logic's (gate, reacquire, re-initialise), and
         # must not exclude the receiver (which would stop the re-initialisation forever)
-        bridged = verdict.gate and self.monitor.mode in _GAP_MODES
+        bridged = verdict.gate and self.monitor.mode in OUTAGE_MODES
         outputs += self.integrity.on_fix(
             fix, meas, None if bridged else update, predicted=predicted, references=refs
         )
@@ -703,9 +703,6 @@ def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavS
         cov[axis, axis] = max(cov[axis, axis], floor**2)
     return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
 
-
-_GAP_MODES = frozenset({NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING})
-"""Outage modes in which the navigator has been carried without GNSS."""
 
 _TICK_S = 0.05
 """Outage-clock resolution: GNSS_LOST is raised within this of its timeout."""

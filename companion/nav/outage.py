@@ -38,8 +38,9 @@ from companion.types import Alert, AlertCode, FixType, GnssFix, NavMode, Severit
 log = logging.getLogger(__name__)
 
 RTK_TYPES = (FixType.RTK_FLOAT, FixType.RTK_FIXED)
-_OUTAGE_MODES = (NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING)
-"""Modes after GNSS was lost and before it is trusted again."""
+OUTAGE_MODES = frozenset({NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING})
+"""Modes after GNSS was lost and before it is trusted again: the navigator has been
+carried without GNSS."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,7 +174,7 @@ class OutageMonitor:
             return FixAssessment(True, "first_fix", False, False, tuple(alerts))
         # fixes rejected since the outage, whether or not one has been fused since: when
         # GNSS returns and the prediction has drifted beyond the gate, no fix ever passes
-        reinit = self.mode in _OUTAGE_MODES and self._gated_rejects >= cfg.reacquire_max_rejects
+        reinit = self.mode in OUTAGE_MODES and self._gated_rejects >= cfg.reacquire_max_rejects
         if reinit:
             alerts.append(
                 Alert(
@@ -189,7 +190,7 @@ class OutageMonitor:
         """The navigator's verdict on a usable fix; returns mode-change alerts."""
         alerts: list[Alert] = []
         if not fused:
-            if self.mode in _OUTAGE_MODES:
+            if self.mode in OUTAGE_MODES:
                 self._gated_rejects += 1
                 self._gated_ok = 0
             return alerts
@@ -217,7 +218,7 @@ class OutageMonitor:
     def reinitialised(self, t_s: float) -> list[Alert]:
         """The engine re-initialised the navigator from a fix; GNSS_BACK if it ends an outage."""
         alerts: list[Alert] = []
-        if self.mode in _OUTAGE_MODES and self.outage_start_t_s is not None:
+        if self.mode in OUTAGE_MODES and self.outage_start_t_s is not None:
             text = f"after {t_s - self.outage_start_t_s:.1f} s (re-initialised)"
             alerts.append(Alert(t_s, AlertCode.GNSS_BACK, Severity.NOTICE, text))
         self.last_fused_t_s = t_s
