@@ -423,7 +423,13 @@ class Engine:
         if self.frame is None:  # _anchor sets it; keeps mypy honest
             raise ValueError("no local frame after anchoring")
         meas = gnss_measurement(fix, self.frame)
-        refs = self.coast.references(meas.t_s) if self.coast is not None else None
+        # the references are for flight: on the ground, before S4 has corrected it, the
+        # autopilot's heading can be degrees off and taxi turns turn that into metres
+        refs = (
+            self.coast.references(meas.t_s)
+            if self.coast is not None and not self._on_ground()
+            else None
+        )
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{fix.receiver_id}_monitored"] += 1
@@ -580,13 +586,21 @@ class Engine:
             gravity = gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
             self.coast = InertialCoast(self._coast_config, gravity)
 
+    def _on_ground(self) -> bool:
+        """Not yet airborne by the autopilot's landed state (False when it sends none)."""
+        return not self._airborne and self._landed not in (None, LandedState.UNDEFINED)
+
     def _anchor_coast(self) -> None:
         """Re-anchor a due coasting slot from the blend at its newest IMU time, only while
         the blend fuses trusted GNSS (never from a solution a fault may have pulled)."""
         coast, blend = self.coast, self.primary
         if coast is None or not isinstance(blend, BlendNavigator) or self.navigator is not blend:
             return
-        if self.monitor.mode is not NavMode.NORMAL or self.integrity.fault_detected:
+        if (
+            self._on_ground()
+            or self.monitor.mode is not NavMode.NORMAL
+            or self.integrity.fault_detected
+        ):
             return
         t_s = blend.imu_t_s
         if not coast.anchor_due(t_s):

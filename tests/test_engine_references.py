@@ -137,3 +137,22 @@ def test_one_receiver_ramp_is_caught_only_against_the_inertial_reference(inertia
     t_detect = faults[0].t_s - 10.0
     assert t_detect >= start_s, f"false alert at {t_detect:.1f} s"
     assert rate * (t_detect - start_s) < 1.0
+
+
+def test_no_inertial_reference_on_the_ground_before_the_heading_is_trusted(tmp_path):
+    """The bundled taxi (tactical IMU, the autopilot's heading 1 deg off until S4 corrects
+    it) with the tactical configuration, inertial references on: taxi turns with a wrong
+    heading would put the coast metres off and exclude the only receiver. While the
+    autopilot says it is on the ground the references are neither anchored nor tested."""
+    from pathlib import Path
+
+    from companion.config import load_config
+    from companion.replay import replay
+
+    root = Path(__file__).resolve().parent.parent / "sitl_fixtures"
+    config = load_config(root / "tactical.toml")
+    assert config.engine.inertial_reference
+    summary = replay(root / "taxi.tlog", tmp_path / "out.tlog", config)
+    assert summary.alerts.get("FAULT", 0) == 0, summary.alerts
+    assert summary.alerts.get("GNSS_LOST", 0) == 0, summary.alerts
+    assert summary.alerts.get("HDG_READY", 0) == 1
