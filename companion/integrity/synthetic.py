@@ -37,7 +37,7 @@ from companion.integrity.monitor import IntegrityMonitor
 from companion.nav import earth
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator, NavState
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
 from companion.types import (
@@ -429,6 +429,20 @@ def run_approach(
     )
 
 
+def _offer(
+    nav: Navigator, monitor: IntegrityMonitor, meas: GnssMeasurement, last_t: dict[int, float]
+) -> GnssUpdate | None:
+    """The engine's receiver policy: the fix goes to the navigator only from the primary,
+    the lowest-numbered receiver not excluded and heard within the last second."""
+    rid = meas.receiver_id
+    last_t[rid] = meas.t_s
+    primary = min(
+        (r for r in last_t if not monitor.exclude(r) and meas.t_s - last_t[r] < 1.0),
+        default=None,
+    )
+    return nav.on_gnss(meas, gate=nav.initialised) if rid == primary else None
+
+
 def _solution(state: NavState, frame: LocalFrame, fix: GnssFix) -> NavSolution:
     """The navigator's state published as the engine would in normal mode."""
     lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
@@ -513,15 +527,7 @@ def run_samples(
         if frame is None:
             frame = LocalFrame(sample.lat_rad, sample.lon_rad, sample.alt_msl_m)
         meas = gnss_measurement(sample, frame)
-        rid = sample.receiver_id
-        last_t[rid] = sample.t_s
-        primary = min(
-            (r for r in last_t if not monitor.exclude(r) and sample.t_s - last_t[r] < 1.0),
-            default=None,
-        )
-        update: GnssUpdate | None = None
-        if rid == primary:
-            update = nav.on_gnss(meas, gate=nav.initialised)
+        update = _offer(nav, monitor, meas, last_t)
         outs = monitor.on_fix(sample, meas, update)
         k = math.floor(sample.t_s * publish_rate_hz + 1e-6)
         if k > tick and nav.initialised:
@@ -616,15 +622,7 @@ def run_samples_ins(
         if not isinstance(sample, GnssFix) or int(sample.fix_type) < int(FixType.FIX_3D):
             continue
         meas = gnss_measurement(sample, frame)
-        rid = sample.receiver_id
-        last_t[rid] = sample.t_s
-        primary = min(
-            (r for r in last_t if not monitor.exclude(r) and sample.t_s - last_t[r] < 1.0),
-            default=None,
-        )
-        update: GnssUpdate | None = None
-        if rid == primary:
-            update = nav.on_gnss(meas, gate=nav.initialised)
+        update = _offer(nav, monitor, meas, last_t)
         refs = coast.references(sample.t_s) if use_coast else None
         outs = monitor.on_fix(sample, meas, update, references=refs)
         for r in list(last_t):
