@@ -263,10 +263,10 @@ def test_fix_test_flags_10_sigma_and_passes_2_sigma() -> None:
     assert f.rejections["inconsistent"] == 1
 
 
-def test_false_alarm_rate_and_gap_nees_are_consistent() -> None:
-    # Normal fixes are rarely flagged, and predictions over 2-s gaps have a
-    # normalised error close to its expectation (3) once calibrated.
-    t, truth, meas, vmeas, var = _flight(8, t_end=90.0, decel=True)
+def _gap_nees(decel: bool, seed: int) -> tuple[list[float], int, int]:
+    """Normalised errors of 1.8 s predictions (every 2 s after 20 s) on a 90 s descent,
+    and how many fixes were tested and flagged meanwhile."""
+    t, truth, meas, vmeas, var = _flight(seed, t_end=90.0, decel=decel)
     f = PotentialFilter(PotentialConfig(seed=4))
     nees: list[float] = []
     flagged = 0
@@ -279,10 +279,41 @@ def test_false_alarm_rate_and_gap_nees_are_consistent() -> None:
         res = f.add_fix(t[k], meas[k], var, vmeas[k])
         tested += res.tested
         flagged += res.tested and not res.consistent
+    return nees, tested, flagged
+
+
+def _nees_upper(n: int) -> float:
+    """Upper 99.5 % bound of the mean of ``n`` chi-square(3) normalised errors."""
+    return float(stats.chi2.ppf(0.995, 3 * n) / n)
+
+
+def test_steady_descent_gap_covariance_is_not_optimistic() -> None:
+    # Constant velocity: predictions over 2-s gaps must not err more than their
+    # covariance says (mean NEES below the chi-square bound). The covariance is
+    # deliberately conservative here (mean NEES about 2: the newest fix's whole
+    # variance is added, see the module docstring), so only the upper side is tested.
+    nees, tested, flagged = _gap_nees(decel=False, seed=8)
+    assert tested > 400 and flagged / tested < 0.02
+    assert float(np.mean(nees)) < _nees_upper(len(nees)), np.mean(nees)
+
+
+def test_decelerating_descent_false_alarms_are_rare() -> None:
+    nees, tested, flagged = _gap_nees(decel=True, seed=8)
     assert tested > 400
     assert flagged / tested < 0.02
-    mean_nees = float(np.mean(nees))
-    assert 1.0 < mean_nees < 6.0, mean_nees
+    assert len(nees) > 30
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known weakness: in a sustained 1 m/s^2 deceleration the 2-s covariance is "
+    "optimistic (mean NEES 5.8 here; 3.3-6.6 over four seeds of a variant levelling off "
+    "at 20 m/s); cause not established (the calibration's in-sample fit residuals are "
+    "the suspect)",
+)
+def test_decelerating_descent_gap_covariance_is_not_optimistic() -> None:
+    nees, _, _ = _gap_nees(decel=True, seed=8)
+    assert float(np.mean(nees)) < _nees_upper(len(nees)), np.mean(nees)
 
 
 def test_predicted_covariance_grows_with_horizon() -> None:
@@ -603,7 +634,9 @@ def test_gap_covariance_covers_correlated_fix_errors() -> None:
                 nees.append(float(e @ np.linalg.solve(pred.cov_ned_m2, e)))
         f.add_fix(t[k], truth[k] + err[k], sig**2, vm[k])
     assert len(nees) > 40
-    assert 1.0 < float(np.mean(nees)) < 6.0, np.mean(nees)
+    n = len(nees)
+    lo, hi = stats.chi2.ppf([0.005, 0.995], 3 * n) / n  # two-sided 99 % for the mean
+    assert lo < float(np.mean(nees)) < hi, np.mean(nees)
 
 
 # ------------------------------------------------------------- accuracy class, real flights
