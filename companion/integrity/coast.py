@@ -350,24 +350,31 @@ class InertialCoast:
         if not ht or self._last_t is None:
             return None
         last = ht[-1]
+        # per axis in Python floats (the same operations, in the same order, as numpy's
+        # elementwise ones would do on the 3-vectors, without a numpy call each)
         if t_s >= last:
             h = t_s - last
             if h > self.config.history_s:
                 return None
-            a = np.array(self._last_a)
-            v = np.array(self._v)
-            return v + a * h, np.array(self._p) + v * h + 0.5 * a * h * h
+            vi = [v + a * h for v, a in zip(self._v, self._last_a, strict=True)]
+            pi = [
+                p + v * h + 0.5 * a * h * h
+                for p, v, a in zip(self._p, self._v, self._last_a, strict=True)
+            ]
+            return np.array(vi), np.array(pi)
         k = bisect.bisect_right(ht, t_s)
         if k == 0:
             return None
         t0, t1 = ht[k - 1], ht[k]
         w = (t_s - t0) / (t1 - t0)
-        v0, v1 = np.array(self._h_v[k - 1]), np.array(self._h_v[k])
-        p0 = np.array(self._h_p[k - 1])
-        vi = v0 + (v1 - v0) * w
+        dt0 = t_s - t0
+        vi = [v0 + (v1 - v0) * w for v0, v1 in zip(self._h_v[k - 1], self._h_v[k], strict=True)]
         # trapezoid inside the interval (linear V): P = P0 + (V0 + Vi) / 2 * (t - t0)
-        pi = p0 + 0.5 * (v0 + vi) * (t_s - t0)
-        return vi, pi
+        pi = [
+            p0 + 0.5 * (v0 + v) * dt0
+            for p0, v0, v in zip(self._h_p[k - 1], self._h_v[k - 1], vi, strict=True)
+        ]
+        return np.array(vi), np.array(pi)
 
     # ------------------------------------------------------------------ anchors
 

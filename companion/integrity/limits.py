@@ -195,8 +195,8 @@ def available_category(hpl_m: float, vpl_m: float, h95_m: float, v95_m: float) -
     S1 accuracy table; S0 / ICAO alert limits (module docstring).
     """
     best = ApproachCategory.NONE
-    values = (hpl_m, vpl_m, h95_m, v95_m)
-    if not all(math.isfinite(v) for v in values):
+    isfinite = math.isfinite
+    if not (isfinite(hpl_m) and isfinite(vpl_m) and isfinite(h95_m) and isfinite(v95_m)):
         return best
     for cat in (ApproachCategory.CAT_I, ApproachCategory.CAT_II, ApproachCategory.CAT_III):
         lim = CATEGORY_LIMITS[cat]

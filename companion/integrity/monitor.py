@@ -99,6 +99,8 @@ log = logging.getLogger(__name__)
 PairKey = tuple[str, str]
 _REF = "ref:"
 """Prefix of a reference solution's name in a pair key (receivers are ``rx<id>``)."""
+_FLOAT_MAX = float(np.finfo(float).max)
+"""What ``np.nan_to_num`` puts for an infinity (with its sign)."""
 _NIS_FLOOR = 1e-6
 """Lower bound of a NIS in the attribution ratio (a perfect fix must not divide by zero)."""
 
@@ -329,14 +331,16 @@ class IntegrityMonitor:
             return []
         if self._now_s is None or t > self._now_s:
             self._now_s = t
-        rx = self._rx.setdefault(rid, _Receiver())
+        rx = self._rx.get(rid)
+        if rx is None:
+            rx = self._rx[rid] = _Receiver()
         reasons: list[str] = []
         culprits: set[int] = set()
         unresolved = False
 
         if rx.last_meas is not None and rx.last_meas.fix_type != meas.fix_type:
             self._restart_series(rid)
-        sep_results = self._separations(meas, references or {})
+        sep_results = self._separations(meas, references)
         innov_failed, fix_reasons = self._fix_tests(meas, update, predicted)
         if update is not None and update.dof > 0 and math.isfinite(update.nis):
             rx.last_nis = update.nis / update.dof
@@ -431,10 +435,12 @@ class IntegrityMonitor:
         self.stats["series_restarted_fix_type"] += 1
 
     def _valid_meas(self, meas: GnssMeasurement) -> bool:
-        return bool(
-            np.all(np.isfinite(meas.pos_ned_m))
-            and np.all(np.isfinite(meas.pos_var_ned_m2))
-            and np.all(meas.pos_var_ned_m2 > 0.0)
+        # on Python floats, not numpy reductions: this runs on every fix
+        var = meas.pos_var_ned_m2.tolist()
+        return (
+            all(map(math.isfinite, meas.pos_ned_m.tolist()))
+            and all(map(math.isfinite, var))
+            and min(var) > 0.0
             and math.isfinite(meas.t_s)
         )
 
@@ -524,13 +530,26 @@ class IntegrityMonitor:
         return tracker
 
     def _separations(
-        self, meas: GnssMeasurement, references: Mapping[str, NavState]
+        self, meas: GnssMeasurement, references: Mapping[str, NavState] | None
     ) -> dict[PairKey, SeparationResult]:
+        """This fix's separations from the other receivers' latest fixes, then from the
+        references, by pair key (only the pairs tested at this epoch)."""
+        results: dict[PairKey, SeparationResult] = {}
+        if len(self._rx) > 1:
+            self._receiver_separations(meas, results)
+        if references:
+            self._reference_separations(meas, references, results)
+        return results
+
+    def _receiver_separations(
+        self, meas: GnssMeasurement, results: dict[PairKey, SeparationResult]
+    ) -> None:
         cfg = self.config
         t = meas.t_s
         rid = meas.receiver_id
-        r_fix = np.diag(meas.pos_var_ned_m2)
-        results: dict[PairKey, SeparationResult] = {}
+        px, py, pz = meas.pos_ned_m.tolist()
+        fix_var = meas.pos_var_ned_m2.tolist()
+        default_vel_var = cfg.default_vel_var_m2ps2
         for qid, other in self._rx.items():
             m = other.last_meas
             if qid == rid or m is None:
@@ -545,28 +564,44 @@ class IntegrityMonitor:
                 continue  # each fix of the other receiver is paired once
             used[rid] = t
             used[qid] = m.t_s
-            vel = np.nan_to_num(m.vel_ned_mps)
-            vel_var = np.where(
-                np.isfinite(m.vel_var_ned_m2ps2), m.vel_var_ned_m2ps2, cfg.default_vel_var_m2ps2
-            )
-            sep = meas.pos_ned_m - (m.pos_ned_m + vel * dt)
-            cov = r_fix + np.diag(m.pos_var_ned_m2 + vel_var * dt * dt)
+            # the other fix carried by dt with its velocity, per axis in floats (3-vectors)
+            vn, ve, vd = _nan_to_num(m.vel_ned_mps.tolist())
+            vel_var = [
+                v if math.isfinite(v) else default_vel_var for v in m.vel_var_ned_m2ps2.tolist()
+            ]
+            mn, me, md = m.pos_ned_m.tolist()
+            sep = [px - (mn + vn * dt), py - (me + ve * dt), pz - (md + vd * dt)]
             if rid != lo:
-                sep = -sep
-            res = self._pair_update(key, t, sep, cov)
+                sep = [-sep[0], -sep[1], -sep[2]]
+            other_var = m.pos_var_ned_m2.tolist()
+            cov = np.diag([fix_var[i] + (other_var[i] + vel_var[i] * dt * dt) for i in range(3)])
+            res = self._pair_update(key, t, np.array(sep), cov)
             if res is not None:
                 results[key] = res
+
+    def _reference_separations(
+        self,
+        meas: GnssMeasurement,
+        references: Mapping[str, NavState],
+        results: dict[PairKey, SeparationResult],
+    ) -> None:
+        cfg = self.config
+        t = meas.t_s
+        rid = meas.receiver_id
+        r_fix = np.diag(meas.pos_var_ned_m2)
+        px, py, pz = meas.pos_ned_m.tolist()
+        tag = f"rx{rid}"
         for name, ref in references.items():
             dt = t - ref.t_s
             if abs(dt) > cfg.pair_max_dt_s:
                 self.stats["reference_too_old"] += 1
                 continue
-            ref_vel = ref.vel_ned_mps
-            if not np.isfinite(ref_vel).all():
-                ref_vel = np.nan_to_num(ref_vel)
-            sep = meas.pos_ned_m - (ref.pos_ned_m + ref_vel * dt)
+            vn, ve, vd = _nan_to_num(ref.vel_ned_mps.tolist())
+            rn, re, rd = ref.pos_ned_m.tolist()
+            # the fix less the reference carried by dt, per axis in floats (3-vector)
+            sep = np.array([px - (rn + vn * dt), py - (re + ve * dt), pz - (rd + vd * dt)])
             cov = r_fix + ref.pos_cov_ned_m2 + ref.vel_cov_ned_m2ps2 * dt * dt
-            key = (f"rx{rid}", _REF + name)
+            key = (tag, _REF + name)
             drift: ReferenceDrift | None = None
             if isinstance(ref, CoastState):
                 drift = self._coast_drift(key, ref, meas)
@@ -575,7 +610,6 @@ class IntegrityMonitor:
             res = self._pair_update(key, t, sep, cov, drift)
             if res is not None:
                 results[key] = res
-        return results
 
     def _coast_drift(
         self, key: PairKey, ref: CoastState, meas: GnssMeasurement
@@ -598,8 +632,8 @@ class IntegrityMonitor:
                 # the fix's variance plus the reference's velocity random walk integrated
                 # over one window (an upper bound of its variance about the window's line)
                 window_var_m2=meas.pos_var_ned_m2 + ref.vrw_psd_m2ps3 * w**3 / 3.0,
-                vel_var_m2ps2=np.diag(ref.vel_cov_ned_m2ps2).copy(),
-                acc_var_m2ps4=np.diag(acc_cov).copy(),
+                vel_var_m2ps2=ref.vel_cov_ned_m2ps2.diagonal().copy(),
+                acc_var_m2ps4=acc_cov.diagonal().copy(),
             )
         except ValueError as exc:
             self.stats["bad_reference"] += 1
@@ -621,6 +655,8 @@ class IntegrityMonitor:
             log.warning("separation %s-%s at t=%.2f s skipped: %s", key[0], key[1], t, exc)
             return None
         self._pair_last[key] = res
+        if not res.reasons:
+            return res
         for reason in ("slope", "residual", "separation"):
             if any(r.startswith(reason) for r in res.reasons):
                 self.stats[f"separation_{reason}"] += 1
@@ -770,6 +806,17 @@ class IntegrityMonitor:
         self.stats["category_changes"] += 1
         severity = Severity.WARNING if avail < old else Severity.NOTICE
         return [Alert(t, AlertCode.CAT, severity, f"{_cat_name(old)} -> {_cat_name(avail)}")]
+
+
+def _nan_to_num(values: list[float]) -> list[float]:
+    """``np.nan_to_num`` on a few floats: NaN to 0, +-inf to +-the largest float (exactly
+    numpy's values, without a numpy call per fix)."""
+    if all(map(math.isfinite, values)):
+        return values
+    return [
+        v if math.isfinite(v) else 0.0 if math.isnan(v) else math.copysign(_FLOAT_MAX, v)
+        for v in values
+    ]
 
 
 def _score(res: SeparationResult) -> float:

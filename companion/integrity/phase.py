@@ -33,6 +33,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from companion.integrity.limits import FlightPhase
 from companion.types import FloatArray, LandedState
 
@@ -104,8 +106,10 @@ class PhaseClassifier:
         landed : the autopilot's landed state, None when not reported.
         """
         cfg = self.config
-        speed = math.hypot(float(vel_ned_mps[0]), float(vel_ned_mps[1]))
-        vd = float(vel_ned_mps[2])
+        vn, ve, vd = (
+            vel_ned_mps.tolist() if isinstance(vel_ned_mps, np.ndarray) else map(float, vel_ned_mps)
+        )
+        speed = math.hypot(vn, ve)
         if not (math.isfinite(speed) and math.isfinite(vd) and math.isfinite(alt_msl_m)):
             return self.phase
         if landed is LandedState.ON_GROUND and self.config.field_elevation_msl_m is None:

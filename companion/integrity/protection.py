@@ -74,7 +74,11 @@ def d_major_m(pos_cov_ned_m2: FloatArray) -> float:
     cov = np.asarray(pos_cov_ned_m2, dtype=float)
     if cov.shape not in ((3, 3), (2, 2)):
         raise ValueError("pos_cov_ned_m2 must be (3, 3) or (2, 2)")
-    dn2, de2, dne = cov[0, 0], cov[1, 1], cov[0, 1]
+    return _d_major(float(cov[0, 0]), float(cov[1, 1]), float(cov[0, 1]))
+
+
+def _d_major(dn2: float, de2: float, dne: float) -> float:
+    """:func:`d_major_m` from the N-N, E-E and N-E covariances (m^2), in floats."""
     half_sum = 0.5 * (dn2 + de2)
     half_diff = 0.5 * (dn2 - de2)
     return math.sqrt(max(half_sum + math.sqrt(half_diff * half_diff + dne * dne), 0.0))
@@ -105,19 +109,15 @@ def protection_levels(pos_cov_ned_m2: FloatArray, k_h: float, k_v: float) -> Pro
     cov = np.asarray(pos_cov_ned_m2, dtype=float)
     if cov.shape != (3, 3):
         raise ValueError("pos_cov_ned_m2 must be (3, 3)")
-    if not np.all(np.isfinite(cov)):
+    # on Python floats, not numpy reductions: this runs on every published solution
+    (dn2, dne, _), (_, de2, _), (_, _, dd2) = rows = cov.tolist()
+    if not all(map(math.isfinite, rows[0] + rows[1] + rows[2])):
         inf = math.inf
         return ProtectionLevels(inf, inf, inf, inf, inf, inf)
-    dmaj = d_major_m(cov)
-    dv = math.sqrt(max(float(cov[2, 2]), 0.0))
-    return ProtectionLevels(
-        hpl_m=k_h * dmaj,
-        vpl_m=k_v * dv,
-        d_major_m=dmaj,
-        d_v_m=dv,
-        h95_m=_H95_FACTOR * dmaj,
-        v95_m=_V95_FACTOR * dv,
-    )
+    dmaj = _d_major(dn2, de2, dne)
+    dv = math.sqrt(max(dd2, 0.0))
+    # positional (hpl, vpl, d_major, d_v, h95, v95): cheaper than keywords, per solution
+    return ProtectionLevels(k_h * dmaj, k_v * dv, dmaj, dv, _H95_FACTOR * dmaj, _V95_FACTOR * dv)
 
 
 _H95_FACTOR = math.sqrt(float(chi2.ppf(ACCURACY_PROB, 2)))

@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,10 @@ TAU_GRID_POINTS = 48
 TAU_GRID_SPAN_WINDOWS = 50.0
 """The longest correlation time searched, in window lengths (beyond it the process is a
 constant over the window: slope and residual vanish)."""
+_NAN3 = np.full(3, math.nan)
+"""The slope of a window too short for the tests (copied per result)."""
+_CHUNK_ELEMENTS = 1 << 20
+"""Largest number of correlation-matrix elements held at once by :func:`thresholds_for_times`."""
 REGULAR_SPACING_TOLERANCE = 0.5
 """A window whose intervals stay within (1 +- this) x their mean uses the cached
 thresholds of a regular grid; otherwise they are computed for the actual times."""
@@ -135,31 +140,54 @@ def thresholds_for_times(
     lag = np.abs(t[:, None] - t[None, :])
     span = float(t[-1] - t[0])
     k_slope = float(norm.isf(slope_false_alarm_prob / 2.0))
-    best_sb2, tau_sb = -1.0, 0.0
-    best_rss, tau_rss = -1.0, 0.0
-    for tau in _tau_grid(span, span / (n - 1)):
-        corr = np.eye(n) if tau == 0.0 else np.exp(-lag / tau)
-        sb2 = float(w @ corr @ w)
-        if sb2 > best_sb2:
-            best_sb2, tau_sb = sb2, float(tau)
+    taus = _tau_grid(span, span / (n - 1))
+    sb2 = np.empty(taus.size)
+    g_h = np.full((2, taus.size), np.nan)  # Satterthwaite scale and dof per tau (NaN: skip)
+    # the taus in chunks of stacked (n, n) correlation matrices: one numpy call per chunk
+    # instead of one per tau (memory bounded by _CHUNK_ELEMENTS)
+    chunk = max(1, _CHUNK_ELEMENTS // (n * n))
+    for lo in range(0, taus.size, chunk):
+        hi = min(lo + chunk, taus.size)
+        corr = _correlations(lag, taus[lo:hi])
+        for k in range(hi - lo):  # per matrix: a stacked product may sum in another order
+            sb2[lo + k] = w @ corr[k] @ w
         # traces of A = M R M (M = I - H, H = X G X^T) in O(n^2):
         # tr A = tr R - tr(G X^T R X); tr A^2 = tr R^2 - 2 tr(G (RX)^T (RX)) + tr((G X^T R X)^2)
+        # (tr R = n: R has a unit diagonal)
         rx = corr @ x_mat
-        xrx = x_mat.T @ rx
-        gxrx = g_mat @ xrx
-        tr_a = float(np.trace(corr) - np.trace(gxrx))
-        tr_a2 = float(
-            np.sum(corr * corr) - 2.0 * np.trace(g_mat @ (rx.T @ rx)) + np.trace(gxrx @ gxrx)
-        )
-        if tr_a <= 0.0 or tr_a2 <= 0.0:
-            continue
-        g = tr_a2 / tr_a
-        h = tr_a * tr_a / tr_a2
-        rss_th = g * float(chi2.isf(residual_false_alarm_prob, h))
+        gxrx = g_mat @ (x_mat.T @ rx)
+        rxrx = g_mat @ (rx.transpose(0, 2, 1) @ rx)
+        gg = gxrx @ gxrx
+        tr_a = float(n) - (gxrx[:, 0, 0] + gxrx[:, 1, 1])
+        tr_r2 = (corr * corr).reshape(hi - lo, n * n).sum(axis=1)
+        tr_a2 = tr_r2 - 2.0 * (rxrx[:, 0, 0] + rxrx[:, 1, 1]) + (gg[:, 0, 0] + gg[:, 1, 1])
+        ok = (tr_a > 0.0) & (tr_a2 > 0.0)
+        g_h[0, lo:hi] = np.where(ok, tr_a2 / np.where(ok, tr_a, 1.0), np.nan)
+        g_h[1, lo:hi] = np.where(ok, tr_a * tr_a / np.where(ok, tr_a2, 1.0), np.nan)
+    best_sb2, tau_sb = -1.0, 0.0
+    for k, value in enumerate(sb2.tolist()):
+        if value > best_sb2:
+            best_sb2, tau_sb = value, float(taus[k])
+    # one vectorised quantile call for every tau (a scipy call costs far more than its maths)
+    usable = np.flatnonzero(np.isfinite(g_h[1]))
+    quantiles = chi2.isf(residual_false_alarm_prob, g_h[1, usable]).tolist()
+    best_rss, tau_rss = -1.0, 0.0
+    for k, q in zip(usable.tolist(), quantiles, strict=True):
+        rss_th = float(g_h[0, k]) * q
         if rss_th > best_rss:
-            best_rss, tau_rss = rss_th, float(tau)
+            best_rss, tau_rss = rss_th, float(taus[k])
     sb = math.sqrt(best_sb2)
     return WindowThresholds(n, sb, k_slope * sb, best_rss, tau_sb, tau_rss)
+
+
+def _correlations(lag_s: FloatArray, taus_s: FloatArray) -> FloatArray:
+    """``exp(-lag / tau)`` for each tau (the identity for tau = 0), shape (taus, n, n)."""
+    n = lag_s.shape[0]
+    white = taus_s == 0.0
+    corr = np.divide(-lag_s, np.where(white, 1.0, taus_s)[:, None, None])
+    np.exp(corr, out=corr)
+    corr[white] = np.eye(n)
+    return corr
 
 
 @functools.lru_cache(maxsize=256)
@@ -313,13 +341,29 @@ class SeparationTracker:
         self._sigma = np.zeros((self._cap, 3))
         self._start = 0
         self._end = 0
+        self._times: deque[float] = deque()
+        """The window's times as floats (``_t[_start:_end]``), for the cheap per-fix checks."""
+        self._count = 0
+        """Samples appended so far (a sample's serial number is the count before it)."""
+        self._first = 0
+        """Serial number of the window's oldest sample."""
+        self._dt_max: deque[tuple[int, float]] = deque()
+        self._dt_min: deque[tuple[int, float]] = deque()
+        """Sliding maximum / minimum of the window's sampling intervals: (serial number of
+        the later sample, interval), the extreme first (monotonic queues: O(1) per sample
+        instead of numpy calls over the window at every fix)."""
 
     def reset(self) -> None:
         """Empty the window."""
         self._start = 0
         self._end = 0
+        self._times.clear()
+        self._dt_max.clear()
+        self._dt_min.clear()
 
-    def _append(self, t_s: float, z: FloatArray, sigma: FloatArray) -> None:
+    def _append(
+        self, t_s: float, z: tuple[float, float, float], sigma: tuple[float, float, float]
+    ) -> None:
         if self._end == self._cap:
             live = self._end - self._start
             if live > self._cap // 2:  # grow: a window denser than expected
@@ -337,8 +381,41 @@ class SeparationTracker:
         self._z[self._end] = z
         self._sigma[self._end] = sigma
         self._end += 1
-        while self._t[self._start] < t_s - self.window_s:
+        times = self._times
+        serial = self._count
+        self._count += 1
+        if times:
+            self._push_interval(serial, t_s - times[-1])
+        else:
+            self._first = serial
+        times.append(t_s)
+        while times[0] < t_s - self.window_s:
+            times.popleft()
             self._start += 1
+            self._first += 1
+        first = self._first
+        for queue in (self._dt_max, self._dt_min):
+            while queue and queue[0][0] <= first:
+                queue.popleft()  # the interval's earlier sample left the window
+
+    def _push_interval(self, serial: int, dt_s: float) -> None:
+        queue = self._dt_max
+        while queue and queue[-1][1] <= dt_s:
+            queue.pop()
+        queue.append((serial, dt_s))
+        queue = self._dt_min
+        while queue and queue[-1][1] >= dt_s:
+            queue.pop()
+        queue.append((serial, dt_s))
+
+    def _window_regular(self, n: int) -> int:
+        """:meth:`_regular` of the current window (``n`` >= 2 samples) from the queues."""
+        times = self._times
+        mean_dt = (times[-1] - times[0]) / (n - 1)
+        tol = REGULAR_SPACING_TOLERANCE * mean_dt
+        if self._dt_max[0][1] - mean_dt <= tol and mean_dt - self._dt_min[0][1] <= tol:
+            return max(1, round(mean_dt * 1e3))
+        return 0
 
     def rotate(self, rot: FloatArray) -> None:
         """Re-express the stored separations with a (3, 3) frame rotation (re-anchoring).
@@ -353,7 +430,7 @@ class SeparationTracker:
     @property
     def last_t_s(self) -> float | None:
         """Time of the newest sample, None when empty."""
-        return float(self._t[self._end - 1]) if self._end > self._start else None
+        return self._times[-1] if self._times else None
 
     def update(
         self,
@@ -376,62 +453,73 @@ class SeparationTracker:
         cov = np.asarray(cov_ned_m2, dtype=float)
         if sep.shape != (3,) or cov.shape != (3, 3):
             raise ValueError("sep_ned_m must be (3,) and cov_ned_m2 (3, 3)")
+        # per axis in Python floats (the same IEEE operations as numpy's elementwise ones,
+        # without a numpy call each): this runs for every pair at every fix
         s0, s1, s2 = sep.tolist()
-        (c00, c01, c02), (_, c11, c12), (_, _, c22) = cov.tolist()
-        if not math.isfinite(s0 + s1 + s2 + float(cov.sum())):
+        rows = cov.tolist()
+        (c00, c01, c02), (_, c11, c12), (_, _, c22) = rows
+        if not all(map(math.isfinite, (s0, s1, s2, *rows[0], *rows[1], *rows[2]))):
             raise ValueError("separation or covariance not finite")
         snap = _mahalanobis3(s0, s1, s2, c00, c01, c02, c11, c12, c22)
-        sigma = np.sqrt(np.diag(cov) if drift is None else np.asarray(drift.window_var_m2))
+        # the Cholesky above proved c00, c11, c22 > 0; ReferenceDrift checks window_var_m2 > 0
+        var = (c00, c11, c22) if drift is None else np.asarray(drift.window_var_m2).tolist()
+        sigma = (math.sqrt(var[0]), math.sqrt(var[1]), math.sqrt(var[2]))
         last = self.last_t_s
         if last is not None and t_s <= last:
             self.reset()  # time went backwards or repeated: restart the series
-        self._append(float(t_s), sep / sigma, sigma)
+        self._append(float(t_s), (s0 / sigma[0], s1 / sigma[1], s2 / sigma[2]), sigma)
         reasons: list[str] = []
         if snap > self.snapshot_threshold:
             reasons.append(
                 f"separation {np.linalg.norm(sep):.2f} m chi2 {snap:.1f} > "
                 f"{self.snapshot_threshold:.1f}"
             )
-        slope_mps = np.full(3, np.nan)
-        slope_ratio = math.nan
-        rss_ratio = math.nan
         n = self._end - self._start
-        t = self._t[self._start : self._end]
-        if n >= self.min_points and (t[-1] - t[0]) >= 0.5 * self.window_s:
-            z = self._z[self._start : self._end]
-            tc = t - float(t.sum()) / n
-            sxx = float(tc @ tc)
-            b = (tc @ z) / sxx
-            # RSS about the line: sum (z - mean)^2 - b^2 sxx, per axis
-            zc = z - z.sum(axis=0) / n
-            rss = np.maximum(np.einsum("ij,ij->j", zc, zc) - b * b * sxx, 0.0)
-            mean_sigma = self._sigma[self._start : self._end].sum(axis=0) / n
-            slope_mps = b * mean_sigma
-            slope_th_mps, rss_th = self.window_thresholds(t, mean_sigma, drift)
-            ratios_s = np.abs(slope_mps) / slope_th_mps
-            ratios_r = rss / rss_th
-            slope_ratio = float(ratios_s.max())
-            rss_ratio = float(ratios_r.max())
-            if slope_ratio > 1.0:
-                i = int(np.argmax(ratios_s))
-                reasons.append(
-                    f"slope {AXES[i]} {100.0 * slope_mps[i]:.1f} cm/s > "
-                    f"{100.0 * slope_th_mps[i]:.1f}"
-                )
-            if rss_ratio > 1.0:
-                i = int(np.argmax(ratios_r))
-                reasons.append(f"residual {AXES[i]} rss {rss[i]:.0f} > {rss_th[i]:.0f} sigma2")
+        times = self._times
+        if n >= self.min_points and (times[-1] - times[0]) >= 0.5 * self.window_s:
+            slope_mps, slope_ratio, rss_ratio = self._window_tests(n, drift, reasons)
+        else:
+            slope_mps, slope_ratio, rss_ratio = _NAN3.copy(), math.nan, math.nan
+        # positional, in field order: cheaper than keywords, per pair and fix
         return SeparationResult(
-            t_s=float(t_s),
-            sep_ned_m=sep,
-            snapshot_stat=snap,
-            snapshot_threshold=self.snapshot_threshold,
-            slope_mps=slope_mps,
-            slope_ratio=slope_ratio,
-            rss_ratio=rss_ratio,
-            window_points=n,
-            reasons=tuple(reasons),
-        )
+            float(t_s), sep, snap, self.snapshot_threshold, slope_mps, slope_ratio, rss_ratio,
+            n, tuple(reasons),
+        )  # fmt: skip
+
+    def _window_tests(
+        self, n: int, drift: ReferenceDrift | None, reasons: list[str]
+    ) -> tuple[FloatArray, float, float]:
+        """Slope and residual tests of the window's ``n`` samples; appends failures to
+        ``reasons``; returns the fitted slope (m/s, (3,)) and the largest slope and
+        residual ratios. The (n, 3) sums are numpy, the per-axis rest Python floats."""
+        lo, hi = self._start, self._end
+        t = self._t[lo:hi]
+        z = self._z[lo:hi]
+        tc = t - float(t.sum()) / n
+        sxx = float(tc @ tc)
+        b_num = (tc @ z).tolist()
+        b = [b_num[0] / sxx, b_num[1] / sxx, b_num[2] / sxx]
+        # RSS about the line: sum (z - mean)^2 - b^2 sxx, per axis
+        zc = z - z.sum(axis=0) / n
+        ss = np.einsum("ij,ij->j", zc, zc).tolist()
+        rss = [max(ss[i] - b[i] * b[i] * sxx, 0.0) for i in range(3)]
+        sig_sum = self._sigma[lo:hi].sum(axis=0).tolist()
+        mean_sigma = [sig_sum[0] / n, sig_sum[1] / n, sig_sum[2] / n]
+        slope = [b[0] * mean_sigma[0], b[1] * mean_sigma[1], b[2] * mean_sigma[2]]
+        slope_th, rss_th = self._thresholds_floats(t, mean_sigma, drift, self._window_regular(n))
+        ratios_s = [abs(slope[i]) / slope_th[i] for i in range(3)]
+        ratios_r = [rss[i] / rss_th[i] for i in range(3)]
+        slope_ratio = max(ratios_s)
+        rss_ratio = max(ratios_r)
+        if slope_ratio > 1.0:
+            i = ratios_s.index(slope_ratio)
+            reasons.append(
+                f"slope {AXES[i]} {100.0 * slope[i]:.1f} cm/s > {100.0 * slope_th[i]:.1f}"
+            )
+        if rss_ratio > 1.0:
+            i = ratios_r.index(rss_ratio)
+            reasons.append(f"residual {AXES[i]} rss {rss[i]:.0f} > {rss_th[i]:.0f} sigma2")
+        return np.array(slope), slope_ratio, rss_ratio
 
     def window_thresholds(
         self, t_s: FloatArray, sigma_m: FloatArray, drift: ReferenceDrift | None = None
@@ -445,19 +533,35 @@ class SeparationTracker:
         docstring for the derivation, with and without a drifting reference.
         """
         t = np.asarray(t_s, dtype=float)
-        sig = np.asarray(sigma_m, dtype=float)
-        regular = self._regular(t)
+        sig = np.asarray(sigma_m, dtype=float).tolist()
+        slope_th, rss_th = self._thresholds_floats(t, sig, drift, self._regular(t))
+        return np.array(slope_th), np.array(rss_th)
+
+    def _thresholds_floats(
+        self, t: FloatArray, sig: list[float], drift: ReferenceDrift | None, regular: int
+    ) -> tuple[list[float], list[float]]:
+        """:meth:`window_thresholds` per axis in Python floats (``sig``: 3 floats;
+        ``regular``: :meth:`_regular` of ``t``)."""
         if drift is None:
             th = self._thresholds(t, self.p_rss, regular)
-            return th.slope_threshold_per_s * sig, np.full(3, th.rss_threshold)
+            k = th.slope_threshold_per_s
+            return [k * sig[0], k * sig[1], k * sig[2]], [th.rss_threshold] * 3
         th = self._thresholds(t, 0.5 * self.p_rss, regular)
-        k_s = th.slope_threshold_per_s / th.slope_sigma_per_s
-        slope_th = k_s * np.sqrt(
-            (th.slope_sigma_per_s * sig) ** 2 + np.asarray(drift.vel_var_m2ps2)
-        )
+        sb = th.slope_sigma_per_s
+        k_s = th.slope_threshold_per_s / sb
+        vel_var = np.asarray(drift.vel_var_m2ps2).tolist()
+        acc_var = np.asarray(drift.acc_var_m2ps4).tolist()
         norm_t2 = _curvature_regular(t.size, regular) if regular else curvature_residual_norm_s2(t)
-        curv = 0.5 * self._k_acc * np.sqrt(np.asarray(drift.acc_var_m2ps4)) * norm_t2 / sig
-        return slope_th, (math.sqrt(th.rss_threshold) + curv) ** 2
+        k_curv = 0.5 * self._k_acc
+        rss_root = math.sqrt(th.rss_threshold)
+        slope_th = []
+        rss_th = []
+        for i in range(3):
+            sbs = sb * sig[i]
+            slope_th.append(k_s * math.sqrt(sbs * sbs + vel_var[i]))
+            root = rss_root + k_curv * math.sqrt(acc_var[i]) * norm_t2 / sig[i]
+            rss_th.append(root * root)
+        return slope_th, rss_th
 
     @staticmethod
     def _regular(t: FloatArray) -> int:

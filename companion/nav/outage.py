@@ -106,6 +106,10 @@ class FixAssessment:
     alerts: tuple[Alert, ...]
 
 
+_USABLE = FixAssessment(True, "ok", True, False, ())
+"""The verdict on a usable fix that raises nothing (most fixes)."""
+
+
 @dataclass(slots=True)
 class _ReceiverState:
     last_t_s: float | None = None
@@ -141,7 +145,9 @@ class OutageMonitor:
     def assess(self, fix: GnssFix, nav_speed_mps: float | None) -> FixAssessment:
         """Judge one fix; ``nav_speed_mps`` is the navigator's ground speed (None if unknown)."""
         cfg = self.config
-        rx = self._receivers.setdefault(fix.receiver_id, _ReceiverState())
+        rx = self._receivers.get(fix.receiver_id)
+        if rx is None:
+            rx = self._receivers[fix.receiver_id] = _ReceiverState()
         alerts: list[Alert] = []
         t = fix.t_s
         ftype = int(fix.fix_type)
@@ -174,7 +180,9 @@ class OutageMonitor:
             return FixAssessment(True, "first_fix", False, False, tuple(alerts))
         # fixes rejected since the outage, whether or not one has been fused since: when
         # GNSS returns and the prediction has drifted beyond the gate, no fix ever passes
-        reinit = self.mode in OUTAGE_MODES and self._gated_rejects >= cfg.reacquire_max_rejects
+        reinit = self._gated_rejects >= cfg.reacquire_max_rejects and self.mode in OUTAGE_MODES
+        if not reinit and not alerts:
+            return _USABLE  # the common verdict, shared (it is immutable)
         if reinit:
             alerts.append(
                 Alert(
@@ -237,7 +245,8 @@ class OutageMonitor:
         if self.last_fused_t_s is None:
             return alerts
         silent_s = t_s - self.last_fused_t_s
-        if self.mode in (NavMode.NORMAL, NavMode.DEGRADED) and silent_s > cfg.gnss_timeout_s:
+        # the time tests first: they are cheaper and almost always false
+        if silent_s > cfg.gnss_timeout_s and self.mode in (NavMode.NORMAL, NavMode.DEGRADED):
             stale = any(r.stale for r in self._receivers.values())
             reason = "stale fixes" if stale else self._silence_reason(t_s)
             self.outage_start_t_s = self.last_fused_t_s
@@ -247,7 +256,7 @@ class OutageMonitor:
             alerts.append(Alert(t_s, AlertCode.BRIDGING, Severity.WARNING, "position carried"))
             self._gated_rejects = 0
             self._set_mode(NavMode.BRIDGING)
-        if self.mode in (NavMode.BRIDGING, NavMode.REACQUIRING) and silent_s > cfg.max_bridge_s:
+        if silent_s > cfg.max_bridge_s and self.mode in (NavMode.BRIDGING, NavMode.REACQUIRING):
             alerts.append(
                 Alert(
                     t_s, AlertCode.INTEGRITY, Severity.CRITICAL, f"bridged {silent_s:.0f} s: lost"
