@@ -68,8 +68,13 @@ def test_published_heading_is_corrected_against_truth(taxi_messages):
     pipeline = Pipeline(cfg)
     frames = run(pipeline, taxi_messages)
     applied_at = next(a.t_s for a in pipeline.alerts if a.code is AlertCode.HDG_APPLIED)
-    truth = np.genfromtxt(TAXI.with_suffix("").with_suffix(".truth.csv"), delimiter=",",
-                          names=True, dtype=None, encoding="utf-8")
+    truth = np.genfromtxt(
+        TAXI.with_suffix("").with_suffix(".truth.csv"),
+        delimiter=",",
+        names=True,
+        dtype=None,
+        encoding="utf-8",
+    )
     before, after = [], []
     for m in parse(frames):
         if m.get_type() != "GLOBAL_POSITION_INT" or m.hdg == 65535:
