@@ -96,10 +96,10 @@ class Pipeline:
     def on_message(self, msg: Any, t_rx_s: float) -> list[bytes]:
         """Take one parsed MAVLink message; return the frames to send."""
         self.stats.messages_in += 1
-        frames: list[bytes] = []
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
-            return frames
+            return []
+        frames: list[bytes] = []
         handle = self.engine.handle
         for sample in samples:
             kind = type(sample)
@@ -115,9 +115,9 @@ class Pipeline:
                     frames += self._encode(out)
             if kind is HeadingCommand:
                 frames += self._acknowledge(msg, sample, outputs)  # type: ignore[arg-type]
-        t_s = samples[-1].t_s
-        if self._next_rate_check_s is None or t_s >= self._next_rate_check_s:
-            frames += self._check_rates(t_s)
+        next_check_s = self._next_rate_check_s
+        if next_check_s is None or samples[-1].t_s >= next_check_s:
+            frames += self._check_rates(samples[-1].t_s)
         return frames
 
     def bad_frames(self, count: int) -> None:
@@ -158,7 +158,13 @@ class Pipeline:
         if isinstance(out, Alert):
             self.alerts.append(out)
             log.warning("CMP %s %s", out.code.value, out.text)
-        return [self._pack(m) for m in self.encoder.encode(out, self.decoder.flavour)]
+        stats = self.stats
+        frames = []
+        for name, frame in self.encoder.encode_frames(out, self.decoder.flavour):
+            stats.out_by_type[name] += 1
+            frames.append(frame)
+        stats.messages_out += len(frames)
+        return frames
 
     def _pack(self, msg: Any) -> bytes:
         stats = self.stats

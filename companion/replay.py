@@ -76,8 +76,9 @@ def replay(
             if next_heartbeat_t is None or t_rx_s >= next_heartbeat_t:
                 writer.write(t_rx_s, pipeline.heartbeat())
                 next_heartbeat_t = t_rx_s + 1.0 / pipeline.config.link.heartbeat_rate_hz
-            for frame in pipeline.on_message(msg, t_rx_s):
-                writer.write(t_rx_s, frame)
+            frames = pipeline.on_message(msg, t_rx_s)
+            if frames:
+                writer.write_frames(t_rx_s, frames)
             count += 1
             if progress is not None and count % PROGRESS_EVERY_MESSAGES == 0:
                 progress(f"{in_path.name}: {count} messages, {t_rx_s - first_t:.0f} s of flight")

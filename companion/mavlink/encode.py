@@ -60,6 +60,7 @@ import collections
 import logging
 import math
 import operator
+import struct
 from dataclasses import dataclass
 from typing import Any
 
@@ -76,6 +77,8 @@ from companion.types import (
     NamedValue,
     NavSolution,
     Output,
+    largest_eigenvalue_2x2,
+    largest_eigenvalue_3x3,
 )
 
 logger = logging.getLogger(__name__)
@@ -95,6 +98,19 @@ _INT16_MAX = 32767
 _UINT16_CAP = 65534
 _CDEG_FULL = 36000
 _OUTPUTS = ("auto", "gps_input", "global_position_sensor")
+_F64 = np.dtype(np.float64)
+# plain-int and module-level copies of enum members and units, for the per-solution path
+_FIX_3D = int(FixType.FIX_3D)
+_RTK_FIXED = int(FixType.RTK_FIXED)
+_ARDUPILOT = AutopilotFlavour.ARDUPILOT
+_PX4 = AutopilotFlavour.PX4
+_DEGE7_PER_RAD = units.DEGE7_PER_RAD
+_MM_PER_M = units.MM_PER_M
+_CM_PER_M = units.CM_PER_M
+_MS_PER_S = units.MS_PER_S
+_US_PER_S = units.US_PER_S
+_CDEG_PER_RAD = units.CDEG_PER_RAD
+_TWO_PI = 2.0 * math.pi
 
 
 _ASCII_SPELLING = str.maketrans({"±": "+/-", "°": "deg", "σ": "sigma", "—": "-"})
@@ -160,6 +176,11 @@ class EncoderConfig:
 
 
 STX_V2 = 0xFD
+HEADER_LEN_V2 = 10
+CRC_LEN = 2
+_HEADER_V2 = struct.Struct("<7B3s")
+"""STX, payload length, incompat and compat flags, seq, system, component, 24-bit id."""
+_CRC = struct.Struct("<H")
 
 
 def _pack_plan(mod: Any, cls: type) -> Any:
@@ -190,43 +211,54 @@ def _pack_plan(mod: Any, cls: type) -> Any:
     return getter, cls.unpacker.pack, msg_id, id_bytes, extra  # type: ignore[attr-defined]
 
 
+def _args_pack_plan(mod: Any, cls: type) -> Any:
+    """``(wire-order picker, payload packer, id bytes, CRC_EXTRA byte)`` to pack a message of
+    class ``cls`` straight from its constructor arguments, or False (MAVLink 1, arrays, no
+    fast CRC: those are built and packed by pymavlink).
+
+    pymavlink's ``pack`` packs the attributes its constructor stored, in wire order
+    (``ordered_fieldnames``); a ``char[]`` field is packed from the raw bytes given to the
+    constructor. So the payload is the constructor arguments permuted to wire order.
+    """
+    try:
+        fields = list(cls.fieldnames)  # type: ignore[attr-defined]
+        ordered = list(cls.ordered_fieldnames)  # type: ignore[attr-defined]
+        lengths = list(cls.lengths)  # type: ignore[attr-defined]
+        msg_id = int(cls.id)  # type: ignore[attr-defined]
+        extra = bytes((int(cls.crc_extra),))  # type: ignore[attr-defined]
+        pack_payload = cls.unpacker.pack  # type: ignore[attr-defined]
+    except (AttributeError, TypeError, ValueError):
+        return False
+    if (
+        getattr(mod, "mcrf4xx", None) is None
+        or float(mod.WIRE_PROTOCOL_VERSION) != 2.0
+        or sum(lengths) != len(lengths)
+        or len(fields) < 2
+        or sorted(fields) != sorted(ordered)
+    ):
+        return False
+    pick = operator.itemgetter(*(fields.index(name) for name in ordered))
+    id_bytes = bytes((msg_id & 0xFF, (msg_id >> 8) & 0xFF, msg_id >> 16))
+    return pick, pack_payload, id_bytes, extra
+
+
+def _floats(value: Any, shape: tuple[int, ...]) -> list[Any]:
+    """``value`` (a vector or a 3x3 matrix of ``shape``) as (nested) lists of Python floats.
+
+    A float64 array of that shape, what the engine publishes, is converted in one call;
+    anything else goes through the general conversion (ValueError/TypeError if it cannot
+    be read as that shape).
+    """
+    if type(value) is np.ndarray and value.dtype == _F64 and value.shape == shape:
+        return value.tolist()  # type: ignore[no-any-return]
+    if shape == (3,):
+        vn, ve, vd = (float(v) for v in value)
+        return [vn, ve, vd]
+    return np.asarray(value, dtype=np.float64).reshape(shape).tolist()  # type: ignore[no-any-return]
+
+
 def _clamp_int(v: float, lo: int, hi: int) -> int:
     return lo if v < lo else hi if v > hi else int(round(v))
-
-
-def _lmax2(a: float, b: float, c: float) -> float:
-    """Largest eigenvalue of the symmetric 2x2 matrix [[a, b], [b, c]] (closed form)."""
-    h = 0.5 * (a - c)
-    return 0.5 * (a + c) + math.sqrt(h * h + b * b)
-
-
-def _lmax3(m: list[list[float]]) -> float:
-    """Largest eigenvalue of a symmetric 3x3 matrix (trigonometric closed form).
-
-    Same value as ``numpy.linalg.eigvalsh(m)[-1]`` (used by NavSolution's
-    accuracy properties) to rounding, at a small fraction of the cost.
-
-    References
-    ----------
-    O. K. Smith, "Eigenvalues of a symmetric 3x3 matrix", Comm. ACM 4(4), 1961.
-    """
-    a00, a01, a02 = m[0]
-    a11, a12 = m[1][1], m[1][2]
-    a22 = m[2][2]
-    p1 = a01 * a01 + a02 * a02 + a12 * a12
-    if p1 == 0.0:
-        return max(a00, a11, a22)
-    q = (a00 + a11 + a22) / 3.0
-    b00, b11, b22 = a00 - q, a11 - q, a22 - q
-    p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
-    det = (
-        b00 * (b11 * b22 - a12 * a12)
-        - a01 * (a01 * b22 - a12 * a02)
-        + a02 * (a01 * a12 - b11 * a02)
-    )
-    r = det / (2.0 * p * p * p)
-    r = -1.0 if r < -1.0 else 1.0 if r > 1.0 else r
-    return q + 2.0 * p * math.cos(math.acos(r) / 3.0)
 
 
 class Encoder:
@@ -263,6 +295,9 @@ class Encoder:
         self.suppressed: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
         self._pack_plans: dict[type, Any] = {}
+        self._args_plans: dict[type, Any] = {}
+        self._gpi_cls = self._mod.MAVLink_global_position_int_message
+        self._gps_input_cls = self._mod.MAVLink_gps_input_message
         self._crc: Any = getattr(self._mod, "mcrf4xx", None)
 
     @property
@@ -343,28 +378,74 @@ class Encoder:
             data = bytes(msg.pack(mav))
         else:
             get, pack_payload, msg_id, id_bytes, extra = plan
-            payload = pack_payload(*get(msg))
-            stripped = payload.rstrip(b"\x00") or payload[:1]
-            head = bytes((STX_V2, len(stripped), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent))
-            buf = head + id_bytes + stripped
-            crc = self._crc(extra, self._crc(buf[1:], 0xFFFF))
-            data = buf + crc.to_bytes(2, "little")
-            msg._payload = stripped
+            data = self._frame(pack_payload(*get(msg)), id_bytes, extra)
+            msg._payload = data[HEADER_LEN_V2:-CRC_LEN]
             msg._header = self._mod.MAVLink_header(
-                msg_id, 0, 0, len(stripped), mav.seq, mav.srcSystem, mav.srcComponent
+                msg_id, 0, 0, data[1], mav.seq, mav.srcSystem, mav.srcComponent
             )
             msg._msgbuf = bytearray(data)
-            msg._crc = crc
+            msg._crc = data[-2] | (data[-1] << 8)
         mav.seq = (mav.seq + 1) % 256
         return data
+
+    def encode_frames(self, out: Output, flavour: AutopilotFlavour) -> list[tuple[str, bytes]]:
+        """``(message name, frame)`` of each message :meth:`encode` gives for ``out``, packed
+        as :meth:`pack` packs them one after the other (the same bytes, the same sequence
+        numbers). Solutions and named values, the frequent outputs, are packed straight
+        from the values, without building pymavlink message objects.
+
+        Raises
+        ------
+        ValueError
+            If ``out`` is not an output type.
+        """
+        kind = type(out)
+        if kind is NavSolution:
+            messages = self._solution_args(out, flavour)  # type: ignore[arg-type]
+        elif kind is NamedValue:
+            messages = self._named_value_args(out)  # type: ignore[arg-type]
+        else:
+            return [(m._type, self.pack(m)) for m in self.encode(out, flavour)]
+        return [self._pack_args(cls, args) for cls, args in messages]
+
+    def _pack_args(self, cls: type, args: tuple[Any, ...]) -> tuple[str, bytes]:
+        """``(name, frame)`` of ``cls(*args)`` as :meth:`pack` would pack it."""
+        plan = self._args_plans.get(cls)
+        if plan is None:
+            plan = self._args_plans[cls] = _args_pack_plan(self._mod, cls)
+        mav = self._mav
+        if plan is False or mav.signing.sign_outgoing:
+            msg = cls(*args)
+            return msg._type, self.pack(msg)
+        pick, pack_payload, id_bytes, extra = plan
+        data = self._frame(pack_payload(*pick(args)), id_bytes, extra)
+        mav.seq = (mav.seq + 1) % 256
+        return cls.msgname, data  # type: ignore[attr-defined]
+
+    def _frame(self, payload: bytes, id_bytes: bytes, extra: bytes) -> bytes:
+        """The unsigned MAVLink 2 frame of ``payload`` with the current sequence number
+        (not advanced here), as pymavlink frames it (trailing zeros truncated)."""
+        mav = self._mav
+        stripped = payload.rstrip(b"\x00") or payload[:1]
+        buf = _HEADER_V2.pack(
+            STX_V2, len(stripped), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent, id_bytes
+        )
+        buf += stripped
+        return buf + _CRC.pack(self._crc(extra, self._crc(buf[1:], 0xFFFF)))
 
     # ------------------------------------------------------------------ outputs
 
     def _solution(self, sol: NavSolution, flavour: AutopilotFlavour) -> list[Any]:
+        return [cls(*args) for cls, args in self._solution_args(sol, flavour)]
+
+    def _solution_args(
+        self, sol: NavSolution, flavour: AutopilotFlavour
+    ) -> list[tuple[type, tuple[Any, ...]]]:
+        """``(message class, constructor arguments)`` of the solution's messages."""
         try:
-            vn, ve, vd = (float(v) for v in sol.vel_ned_mps)
-            pc = np.asarray(sol.pos_cov_ned_m2, dtype=np.float64).reshape(3, 3).tolist()
-            vc = np.asarray(sol.vel_cov_ned_m2ps2, dtype=np.float64).reshape(3, 3).tolist()
+            vn, ve, vd = _floats(sol.vel_ned_mps, (3,))
+            pc = _floats(sol.pos_cov_ned_m2, (3, 3))
+            vc = _floats(sol.vel_cov_ned_m2ps2, (3, 3))
         except (TypeError, ValueError):
             self.dropped["malformed_solution"] += 1
             logger.warning("not encoding a malformed navigation solution at t=%s", sol.t_s)
@@ -375,90 +456,101 @@ class Encoder:
             self.dropped["nonfinite_solution"] += 1
             logger.warning("not encoding a non-finite navigation solution at t=%s", sol.t_s)
             return []
-        lat = _clamp_int(sol.lat_rad * units.DEGE7_PER_RAD, -900_000_000, 900_000_000)
-        lon = _clamp_int(sol.lon_rad * units.DEGE7_PER_RAD, -1_800_000_000, 1_800_000_000)
-        alt_mm = _clamp_int(sol.alt_msl_m * units.MM_PER_M, -(2**31), 2**31 - 1)
+        lat = _clamp_int(sol.lat_rad * _DEGE7_PER_RAD, -900_000_000, 900_000_000)
+        lon = _clamp_int(sol.lon_rad * _DEGE7_PER_RAD, -1_800_000_000, 1_800_000_000)
+        alt_mm = _clamp_int(sol.alt_msl_m * _MM_PER_M, -(2**31), 2**31 - 1)
         if self._first_alt_mm is None:
             self._first_alt_mm = alt_mm
         yaw_cd: int | None = None
-        if sol.yaw_rad is not None and math.isfinite(sol.yaw_rad):
-            yaw_cd = int(round((sol.yaw_rad % (2.0 * math.pi)) * units.CDEG_PER_RAD)) % _CDEG_FULL
+        yaw_rad = sol.yaw_rad
+        if yaw_rad is not None and math.isfinite(yaw_rad):
+            yaw_cd = int(round((yaw_rad % _TWO_PI) * _CDEG_PER_RAD)) % _CDEG_FULL
         # the engine publishes at whole milliseconds; round, never truncate (a truncated
         # millisecond is 3 cm along-track at approach speed)
-        time_boot_ms = round(sol.t_s * units.MS_PER_S) % (1 << 32)
-        k = units.CM_PER_M
-        gpi = self._mod.MAVLink_global_position_int_message(
-            time_boot_ms,
-            lat,
-            lon,
-            alt_mm,
-            _clamp_int(alt_mm - self._first_alt_mm, -(2**31), 2**31 - 1),
-            _clamp_int(vn * k, -_INT16_MAX, _INT16_MAX),
-            _clamp_int(ve * k, -_INT16_MAX, _INT16_MAX),
-            _clamp_int(vd * k, -_INT16_MAX, _INT16_MAX),
-            units.UINT16_UNKNOWN if yaw_cd is None else yaw_cd,
+        time_boot_ms = round(sol.t_s * _MS_PER_S) % (1 << 32)
+        k = _CM_PER_M
+        gpi = (
+            self._gpi_cls,
+            (
+                time_boot_ms,
+                lat,
+                lon,
+                alt_mm,
+                _clamp_int(alt_mm - self._first_alt_mm, -(2**31), 2**31 - 1),
+                _clamp_int(vn * k, -_INT16_MAX, _INT16_MAX),
+                _clamp_int(ve * k, -_INT16_MAX, _INT16_MAX),
+                _clamp_int(vd * k, -_INT16_MAX, _INT16_MAX),
+                units.UINT16_UNKNOWN if yaw_cd is None else yaw_cd,
+            ),
         )
-        out = [gpi]
-        kind = self.config.output
+        out: list[tuple[type, tuple[Any, ...]]] = [gpi]
+        cfg = self.config
+        kind = cfg.output
         if kind == "auto":
-            if flavour == AutopilotFlavour.ARDUPILOT:
+            if flavour is _ARDUPILOT:
                 kind = "gps_input"
-            elif flavour == AutopilotFlavour.PX4:
+            elif flavour is _PX4:
                 kind = "global_position_sensor"
             else:
                 return out
-        cfg = self.config
         # the same quantities as NavSolution.h_acc_m / v_acc_m / vel_acc_mps, in closed form
-        h_acc = max(math.sqrt(max(_lmax2(pc[0][0], pc[0][1], pc[1][1]), 0.0)), cfg.min_h_acc_m)
+        h_lmax = largest_eigenvalue_2x2(pc[0][0], pc[0][1], pc[1][1])
+        h_acc = max(math.sqrt(max(h_lmax, 0.0)), cfg.min_h_acc_m)
         v_acc = max(math.sqrt(max(pc[2][2], 0.0)), cfg.min_v_acc_m)
         if kind == "gps_input":
-            s_acc = max(math.sqrt(max(_lmax3(vc), 0.0)), cfg.min_vel_acc_mps)
+            s_acc = max(math.sqrt(max(largest_eigenvalue_3x3(vc), 0.0)), cfg.min_vel_acc_mps)
             if yaw_cd is None or not cfg.gps_input_yaw:
                 yaw_field = 0
             else:
                 yaw_field = yaw_cd if yaw_cd != 0 else _CDEG_FULL
             out.append(
-                self._mod.MAVLink_gps_input_message(
-                    round(sol.t_s * units.US_PER_S),
-                    cfg.gps_id,
-                    0,  # ignore_flags: every field is provided
-                    0,  # time_week_ms: no GPS time
-                    0,  # time_week: 0 disables ArduPilot's jitter correction
-                    # ArduPilot's GPS_Status stops at RTK fixed (6): STATIC/PPP go as 3D
-                    int(sol.fix_type) if sol.fix_type <= FixType.RTK_FIXED else int(FixType.FIX_3D),
-                    lat,
-                    lon,
-                    float(sol.alt_msl_m),
-                    h_acc / cfg.uere_m,
-                    v_acc / cfg.uere_m,
-                    vn,
-                    ve,
-                    vd,
-                    s_acc,
-                    h_acc,
-                    v_acc,
-                    _clamp_int(sol.satellites, 0, 254),
-                    yaw_field,
+                (
+                    self._gps_input_cls,
+                    (
+                        round(sol.t_s * _US_PER_S),
+                        cfg.gps_id,
+                        0,  # ignore_flags: every field is provided
+                        0,  # time_week_ms: no GPS time
+                        0,  # time_week: 0 disables ArduPilot's jitter correction
+                        # ArduPilot's GPS_Status stops at RTK fixed (6): STATIC/PPP go as 3D
+                        int(sol.fix_type) if sol.fix_type <= _RTK_FIXED else _FIX_3D,
+                        lat,
+                        lon,
+                        float(sol.alt_msl_m),
+                        h_acc / cfg.uere_m,
+                        v_acc / cfg.uere_m,
+                        vn,
+                        ve,
+                        vd,
+                        s_acc,
+                        h_acc,
+                        v_acc,
+                        _clamp_int(sol.satellites, 0, 254),
+                        yaw_field,
+                    ),
                 )
             )
         else:
-            healthy = sol.fix_type >= FixType.FIX_3D
+            healthy = sol.fix_type >= _FIX_3D
             alt_hae = sol.alt_hae_m
             out.append(
-                self._mod.MAVLink_global_position_sensor_message(
-                    self.system_id,
-                    units.MAV_COMP_ID_AUTOPILOT1,
-                    cfg.gps_id,
-                    round(sol.t_s * units.US_PER_S),
-                    0,
-                    GLOBAL_POSITION_SRC_ESTIMATOR,
-                    GLOBAL_POSITION_PRIMARY if healthy else GLOBAL_POSITION_UNHEALTHY,
-                    lat,
-                    lon,
-                    math.nan if alt_hae is None else float(alt_hae),
-                    float(sol.alt_msl_m),
-                    h_acc,
-                    v_acc,
+                (
+                    self._mod.MAVLink_global_position_sensor_message,
+                    (
+                        self.system_id,
+                        units.MAV_COMP_ID_AUTOPILOT1,
+                        cfg.gps_id,
+                        round(sol.t_s * units.US_PER_S),
+                        0,
+                        GLOBAL_POSITION_SRC_ESTIMATOR,
+                        GLOBAL_POSITION_PRIMARY if healthy else GLOBAL_POSITION_UNHEALTHY,
+                        lat,
+                        lon,
+                        math.nan if alt_hae is None else float(alt_hae),
+                        float(sol.alt_msl_m),
+                        h_acc,
+                        v_acc,
+                    ),
                 )
             )
         return out
@@ -482,6 +574,10 @@ class Encoder:
         ]
 
     def _named_value(self, nv: NamedValue) -> list[Any]:
+        return [cls(*args) for cls, args in self._named_value_args(nv)]
+
+    def _named_value_args(self, nv: NamedValue) -> list[tuple[type, tuple[Any, ...]]]:
+        """``(NAMED_VALUE_FLOAT class, constructor arguments)``, or nothing if dropped."""
         if len(nv.name) > NAMED_VALUE_MAX_CHARS or not nv.name.isascii():
             self.dropped["bad_name"] += 1
             logger.warning("NAMED_VALUE_FLOAT name %r is not 1..10 ASCII chars; dropped", nv.name)
@@ -490,8 +586,13 @@ class Encoder:
             self.dropped["nonfinite_value"] += 1
             return []
         return [
-            self._mod.MAVLink_named_value_float_message(
-                round(nv.t_s * units.MS_PER_S) % (1 << 32), nv.name.encode("ascii"), float(nv.value)
+            (
+                self._mod.MAVLink_named_value_float_message,
+                (
+                    round(nv.t_s * _MS_PER_S) % (1 << 32),
+                    nv.name.encode("ascii"),
+                    float(nv.value),
+                ),
             )
         ]
 

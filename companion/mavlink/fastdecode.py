@@ -10,6 +10,10 @@ for that message (its ``unpacker`` struct, ``orders``, ``lengths``,
 attributes (fields, ``_header``, ``_msgbuf``, ``_payload``, ``_crc``,
 ``_signed`` ...). The CRC is checked with the dialect's own CRC-16/MCRF4XX.
 
+:meth:`FastDecoder.message_at` returns the message alone (the tlog reader knows
+the length of such a frame from its header); :meth:`FastDecoder.decode_at` adds the
+frame length, for :func:`companion.mavlink.frames.try_frame`.
+
 Everything else -- MAVLink 1 frames, signed frames, a CRC mismatch (so that
 pymavlink raises its own error), ``MAV_IGNORE_CRC`` set -- goes to pymavlink
 (:meth:`FastDecoder.decode` returns None and the caller falls back).
@@ -40,11 +44,25 @@ _CRC_INIT = 0xFFFF
 class _Plan:
     """How to turn one message id's payload into its pymavlink object."""
 
-    __slots__ = ("cls", "unpack", "size", "extra", "fields", "pick", "arrays", "has_bytes", "base")
+    __slots__ = (
+        "cls",
+        "unpack",
+        "unpack_from",
+        "size",
+        "extra",
+        "fields",
+        "pick",
+        "arrays",
+        "has_bytes",
+        "base",
+    )
 
     def __init__(self, cls: Any) -> None:
         self.cls = cls
         self.unpack: Callable[[bytes | bytearray], tuple[Any, ...]] = cls.unpacker.unpack
+        self.unpack_from: Callable[[bytes | bytearray, int], tuple[Any, ...]] = (
+            cls.unpacker.unpack_from
+        )
         self.size: int = cls.unpacker.size
         self.extra = bytes((cls.crc_extra,))
         self.fields: list[str] = list(cls.fieldnames)
@@ -152,13 +170,20 @@ class FastDecoder:
         to let pymavlink decide (not an unsigned MAVLink 2 frame of a plain message, too
         short yet, or a CRC mismatch). The frame's bytes are copied into the message's
         ``_msgbuf`` (a bytearray, as pymavlink keeps it)."""
-        if buf[pos] != STX_V2 or not self.enabled or len(buf) - pos < HEADER_LEN_V2:
+        msg = self.message_at(buf, pos)
+        if msg is None:
             return None
-        if buf[pos + 2] != 0:
-            return None  # signed, or unknown incompatibility flags
+        return msg, HEADER_LEN_V2 + buf[pos + 1] + CRC_LEN
+
+    def message_at(self, buf: bytearray, pos: int) -> Any | None:
+        """The message of :meth:`decode_at` alone (its frame is ``12 + buf[pos + 1]``
+        bytes long, an unsigned MAVLink 2 frame), or None."""
+        avail = len(buf) - pos
+        if avail < HEADER_LEN_V2 or buf[pos] != STX_V2 or buf[pos + 2] != 0 or not self.enabled:
+            return None  # short, not MAVLink 2, signed or unknown flags, or no CRC check
         mlen = buf[pos + 1]
-        end = pos + HEADER_LEN_V2 + mlen + CRC_LEN
-        if end > len(buf):
+        n = HEADER_LEN_V2 + mlen + CRC_LEN
+        if n > avail:
             return None
         msg_id = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
         try:
@@ -168,18 +193,20 @@ class FastDecoder:
         crc_fn = self._crc
         if plan is None or crc_fn is None:
             return None
-        frame = buf[pos:end]
-        n = end - pos
+        frame = buf[pos : pos + n]
         crc = frame[n - 2] | (frame[n - 1] << 8)
         if crc_fn(plan.extra, crc_fn(frame[1 : n - 2], _CRC_INIT)) != crc:
             return None  # pymavlink raises its own error for it
-        payload = frame[HEADER_LEN_V2 : n - 2]
         size = plan.size
-        if mlen < size:
-            payload.extend(bytes(size - mlen))  # truncated by the sender: zero-extend
-        elif mlen > size:
-            payload = payload[:size]
-        t = plan.unpack(payload)
+        if mlen == size:
+            t = plan.unpack_from(frame, HEADER_LEN_V2)
+        else:
+            payload = frame[HEADER_LEN_V2 : n - 2]
+            if mlen < size:
+                payload.extend(bytes(size - mlen))  # truncated by the sender: zero-extend
+            else:
+                payload = payload[:size]
+            t = plan.unpack(payload)
         arrays = plan.arrays
         if arrays is None:
             values: Any = plan.pick(t)
@@ -194,9 +221,9 @@ class FastDecoder:
         msg = self._new(plan.cls)
         d = msg.__dict__
         d.update(plan.base)
-        d.update(zip(plan.fields, values, strict=True))
+        d.update(zip(plan.fields, values, strict=False))  # as many as fields, by construction
         d["_msgbuf"] = frame
         d["_payload"] = frame[6 : n - 2]
         d["_crc"] = crc
         d["_header"] = self._header_cls(msg_id, 0, frame[3], mlen, frame[4], frame[5], frame[6])
-        return msg, n
+        return msg

@@ -154,6 +154,8 @@ class RateMonitor:
         self._times: dict[str, collections.deque[float]] = {
             k: collections.deque() for k in self.rates_hz
         }
+        self._queue_of: dict[str, collections.deque[float] | None] = dict(self._times)
+        """Any name seen -> its window (pymavlink class names too), None if not monitored."""
         self._start_s: float | None = None
 
     def reset(self, t_s: float | None = None) -> None:
@@ -170,17 +172,23 @@ class RateMonitor:
         """
         if self._start_s is None:
             self._start_s = t_s
-        q = self._times.get(msg_type)
+        try:
+            q = self._queue_of[msg_type]
+        except KeyError:
+            q = self._queue_of[msg_type] = self._window_of(msg_type)
         if q is None:
-            if not msg_type.startswith("MAVLink_"):
-                return
-            q = self._times.get(msg_type[8:].removesuffix("_message").upper())
-            if q is None:
-                return
+            return
         q.append(t_s)
         lo = t_s - self.window_s
         while q and q[0] < lo:
             q.popleft()
+
+    def _window_of(self, msg_type: str) -> collections.deque[float] | None:
+        """The window of a MAVLink name or pymavlink class name; None if not monitored."""
+        q = self._times.get(msg_type)
+        if q is None and msg_type.startswith("MAVLink_"):
+            q = self._times.get(msg_type[8:].removesuffix("_message").upper())
+        return q
 
     def measured_hz(self, msg_type: str, t_s: float) -> float:
         """Rate of ``msg_type`` over the window ending at ``t_s``, Hz."""

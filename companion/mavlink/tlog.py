@@ -39,8 +39,10 @@ from typing import Any, BinaryIO
 
 from companion.mavlink.fastdecode import FastDecoder
 from companion.mavlink.frames import (
+    CRC_LEN,
     FRAME_BAD,
     FRAME_NEED_MORE,
+    HEADER_LEN_V2,
     STX_V1,
     STX_V2,
     load_dialect,
@@ -53,6 +55,9 @@ logger = logging.getLogger(__name__)
 TIMESTAMP_LEN = 8
 _TS = struct.Struct(">Q")
 _CHUNK_BYTES = 1 << 20
+_BYTES_LIKE = (bytes, bytearray, memoryview)
+_V2_OVERHEAD = HEADER_LEN_V2 + CRC_LEN
+"""Bytes of an unsigned MAVLink 2 frame besides its payload."""
 
 
 class TlogError(Exception):
@@ -126,7 +131,8 @@ class TlogReader:
             return
         mav = self._mod.MAVLink(None)
         mmap_ = self._mod.mavlink_map
-        fast = FastDecoder(self._mod)
+        message_at = FastDecoder(self._mod).message_at
+        timestamp_at = _TS.unpack_from
         stats = self.stats
         buf = bytearray()
         last_us: int | None = None
@@ -152,35 +158,40 @@ class TlogReader:
                 n = len(buf)
                 while n - pos > TIMESTAMP_LEN:
                     p = pos + TIMESTAMP_LEN
-                    c = buf[p]
-                    if c == STX_V2 or c == STX_V1:
-                        status, msg, length = try_frame(mav, mmap_, buf, p, fast)
+                    # the usual record first: an unsigned MAVLink 2 frame the fast path decodes
+                    msg = message_at(buf, p)
+                    if msg is not None:
+                        length = _V2_OVERHEAD + buf[p + 1]
                     else:
-                        status, msg, length = FRAME_BAD, None, 0
-                    if status == FRAME_NEED_MORE:
-                        if not eof:
-                            break
-                        # At the end of the file this frame can never complete: either the
-                        # last record is cut short, or a false STX in a bad region.
-                        if not in_bad:
-                            in_bad = True
-                            tail_cut = True
-                        stats["bad_bytes"] += 1
-                        pos += 1
-                        continue
-                    if status == FRAME_BAD:
-                        if not in_bad:
-                            in_bad = True
-                            stats["bad_region"] += 1
-                        stats["bad_bytes"] += 1
-                        pos += 1
-                        continue
+                        if buf[p] == STX_V2 or buf[p] == STX_V1:
+                            # pymavlink decides what the fast path declined
+                            status, msg, length = try_frame(mav, mmap_, buf, p)
+                        else:
+                            status = FRAME_BAD
+                        if status == FRAME_NEED_MORE:
+                            if not eof:
+                                break
+                            # At the end of the file this frame can never complete: either
+                            # the last record is cut short, or a false STX in a bad region.
+                            if not in_bad:
+                                in_bad = True
+                                tail_cut = True
+                            stats["bad_bytes"] += 1
+                            pos += 1
+                            continue
+                        if status == FRAME_BAD:
+                            if not in_bad:
+                                in_bad = True
+                                stats["bad_region"] += 1
+                            stats["bad_bytes"] += 1
+                            pos += 1
+                            continue
                     # FRAME_OK
                     if tail_cut:  # the region that began with a cut frame was not the tail
                         stats["bad_region"] += 1
                         tail_cut = False
                     in_bad = False
-                    t_us = _TS.unpack_from(buf, pos)[0]
+                    t_us = timestamp_at(buf, pos)[0]
                     pos = p + length
                     if last_us is not None and (t_us < last_us or t_us - last_us > max_gap):
                         stats["time_backwards" if t_us < last_us else "time_jump"] += 1
@@ -269,19 +280,46 @@ class TlogWriter:
         ValueError
             If ``t_s`` is negative or not finite, or the writer is closed.
         """
-        if self._fh is None:
+        fh = self._fh
+        if fh is None:
             raise ValueError("TlogWriter is closed")
+        fh.write(self._stamp(t_s) + self._frame(msg_or_bytes))
+        self.records += 1
+
+    def write_frames(self, t_s: float, frames: list[bytes]) -> None:
+        """Append one record per frame, all stamped ``t_s`` (what :meth:`write` does for
+        each, in one write).
+
+        Raises
+        ------
+        ValueError
+            As :meth:`write`.
+        """
+        fh = self._fh
+        if fh is None:
+            raise ValueError("TlogWriter is closed")
+        stamp = self._stamp(t_s)
+        fh.write(b"".join([stamp + self._frame(frame) for frame in frames]))
+        self.records += len(frames)
+
+    @staticmethod
+    def _stamp(t_s: float) -> bytes:
+        """The 8-byte record time of ``t_s`` (s); ValueError when negative or not finite."""
         if not (t_s >= 0.0 and t_s < 1.8e13):
             raise ValueError(f"tlog timestamp must be finite and >= 0, got {t_s!r}")
-        if isinstance(msg_or_bytes, bytes | bytearray | memoryview):
-            data = bytes(msg_or_bytes)
-        else:
-            data = msg_or_bytes.get_msgbuf()
-            if not data:
-                data = msg_or_bytes.pack(self._mav)
-                self._mav.seq = (self._mav.seq + 1) % 256
-        self._fh.write(_TS.pack(int(round(t_s * US_PER_S))) + data)
-        self.records += 1
+        return _TS.pack(int(round(t_s * US_PER_S)))
+
+    def _frame(self, msg_or_bytes: Any) -> bytes:
+        """The frame's bytes: as given, or of a message (packed now if it never was)."""
+        if type(msg_or_bytes) is bytes:
+            return msg_or_bytes
+        if isinstance(msg_or_bytes, _BYTES_LIKE):
+            return bytes(msg_or_bytes)
+        data = msg_or_bytes.get_msgbuf()
+        if not data:
+            data = msg_or_bytes.pack(self._mav)
+            self._mav.seq = (self._mav.seq + 1) % 256
+        return data  # type: ignore[no-any-return]
 
     def flush(self) -> None:
         """Flush to the OS."""

@@ -168,3 +168,16 @@ def test_frame_parser_with_fast_path_matches_pymavlink() -> None:
     want = [m for m in want if m is not None]
     assert [_state(m) for m in got] == [_state(m) for m in want]
     assert parser.bad_frames == 1
+
+
+def test_incomplete_frames_are_declined_without_error() -> None:
+    # every prefix of a good frame (a reader's buffer cut anywhere): None, never an
+    # IndexError, and the full frame at any offset decodes to its length
+    frame = bytearray(Packer()(raw_imu(1000)))
+    dec = FastDecoder(apm)
+    for cut in range(len(frame)):
+        assert dec.decode_at(frame[:cut] if cut else bytearray(b"\xfd"), 0) is None
+        assert dec.message_at(bytearray(b"\x00" * 5) + frame[:cut], 5) is None
+    found = dec.decode_at(bytearray(b"\x00" * 5) + frame + bytearray(3), 5)
+    assert found is not None and found[1] == len(frame)
+    assert bytes(found[0].get_msgbuf()) == bytes(frame)

@@ -184,3 +184,19 @@ def test_corrupt_tlog_through_the_decoder_gives_every_good_sample(tmp_path: Path
     dec.bad_frame(reader.stats["bad_region"])
     assert dec.rejections["corrupt_frame"] == regions
     assert all(b.t_s > a.t_s for a, b in zip(samples, samples[1:], strict=False))
+
+
+def test_write_frames_is_write_per_frame(tmp_path: Path) -> None:
+    frames = [f for _, f in RECORDS[:7]]
+    with TlogWriter(tmp_path / "one.tlog") as a, TlogWriter(tmp_path / "many.tlog") as b:
+        for i in range(3):
+            t = T0 + 0.5 * i
+            for f in frames[i:]:
+                a.write(t, f)
+            b.write_frames(t, frames[i:])
+        b.write_frames(T0 + 2.0, [])
+        assert a.records == b.records == 7 + 6 + 5
+    assert (tmp_path / "one.tlog").read_bytes() == (tmp_path / "many.tlog").read_bytes()
+    with TlogWriter(tmp_path / "w.tlog") as w, pytest.raises(ValueError):
+        w.write_frames(-1.0, frames)
+    assert (tmp_path / "w.tlog").read_bytes() == b""
