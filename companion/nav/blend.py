@@ -95,9 +95,11 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from companion.nav import ins
 from companion.nav.frames import LocalFrame, quat_to_euler, skew, wrap_pi
@@ -114,6 +116,10 @@ from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotat
 from companion.types import AttitudeSample, FixType, FloatArray, ImuSample
 
 log = logging.getLogger(__name__)
+
+Vec3 = tuple[float, float, float]
+Mat3Values = tuple[float, float, float, float, float, float, float, float, float]
+"""A 3x3 matrix as 9 floats, row-major (:func:`companion.nav.ins.quat_to_mat_values`)."""
 
 _DEG = math.pi / 180.0
 _HOUR_S = 3600.0
@@ -302,8 +308,10 @@ class _Snapshot:
     """Nominal state and covariance at a segment boundary, with the segment that follows."""
 
     t_s: float
-    pos: FloatArray
-    vel: FloatArray
+    pos: tuple[float, ...]
+    """Nominal position (3 floats, NED, m)."""
+    vel: tuple[float, ...]
+    """Nominal velocity (3 floats, NED, m/s)."""
     q_nb: ins.Quat
     p_mat: FloatArray
     phi: FloatArray | None = None
@@ -348,8 +356,13 @@ class BlendNavigator:
         cfg = self.config
         h_fl, v_fl = cfg.pos_std_floor_m
         self._pos_floor_t = (h_fl**2, h_fl**2, v_fl**2)
-        self._pos_floor = np.array(self._pos_floor_t)
-        self._h_cache: dict[tuple[bool, ...], tuple[FloatArray, FloatArray, FloatArray]] = {}
+        # variances assumed when the receiver reports none (FALLBACK_STD_M squared)
+        self._pos_fallback = {
+            fix: (h_std**2, h_std**2, v_std**2) for fix, (h_std, v_std) in FALLBACK_STD_M.items()
+        }
+        self._pos_fallback_other = (10.0**2, 10.0**2, 15.0**2)
+        self._vel_fallback_floor = (cfg.vel_std_fallback_mps**2, cfg.vel_std_floor_mps**2)
+        self._h_cache: dict[tuple[bool, ...], tuple[tuple[int, ...], FloatArray]] = {}
         self._gm = cfg.gnss_error_model == "gauss_markov"
         self._max_imu_gap_s = cfg.max_imu_gap_s
         self._cov_interval_s = cfg.cov_interval_s
@@ -363,6 +376,11 @@ class BlendNavigator:
             tau_ba_s=cfg.accel_bias_tau_s,
             tau_bg_s=cfg.gyro_bias_tau_s,
         )
+        self._f_flat = self._f_template.reshape(-1)  # a view: writes fill the template
+        self._f_idx = _flat_index(
+            _F_VARIABLE_ENTRIES + (_F_STRAPDOWN_ENTRIES if self._strapdown else [])
+        )
+        self._van_loan = cfg.cov_discretisation == "van_loan"
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -376,11 +394,13 @@ class BlendNavigator:
         """Forget everything (the configuration and frame are kept)."""
         self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
         self._init = False
-        self._pre_imu: deque[tuple[float, tuple[float, float, float], tuple[float, float, float]]]
+        self._pre_imu: deque[tuple[float, list[float], list[float]]]
         self._pre_imu = deque()
         self._p = np.zeros((N_STATE, N_STATE))
-        self._gb = np.zeros(3)
+        self._gb = [0.0, 0.0, 0.0]
         self._gb_var = np.zeros(3)
+        self._gb_var_l = [0.0, 0.0, 0.0]
+        self._r_scale_last: list[float] | None = None
         self._gb_fix: FixType | None = None
         self._gb_tau = 300.0
         self._hist: deque[_Snapshot] = deque()
@@ -395,8 +415,8 @@ class BlendNavigator:
 
     def on_imu(self, sample: ImuSample) -> None:
         """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
-        acc_t = tuple(sample.acc_b_mps2.tolist())
-        gyro_t = tuple(sample.gyro_b_radps.tolist())
+        acc_t = sample.acc_b_mps2.tolist()
+        gyro_t = sample.gyro_b_radps.tolist()
         if len(acc_t) != 3 or len(gyro_t) != 3:
             self._reject("imu_bad_shape")
             return
@@ -423,7 +443,7 @@ class BlendNavigator:
             return
         if dt > self._max_imu_gap_s:
             self._reject("imu_gap")
-        mech.step(sample.t_s, acc_t, gyro_t)  # type: ignore[arg-type]
+        mech.step(sample.t_s, acc_t, gyro_t)
         if mech.seg_dt_s >= self._cov_interval_s:
             self._close_segment()
 
@@ -453,14 +473,14 @@ class BlendNavigator:
             self._att_corr = ins.quat_normalise(
                 ins.quat_mul(ins.quat_from_rotvec(0.0, 0.0, turn), self._att_corr)
             )
-        mech.q_nb = ins.rotate_by_psi(mech.q_nb, np.array([0.0, 0.0, turn]))
+        mech.q_nb = ins.rotate_by_rotvec(mech.q_nb, 0.0, 0.0, turn)
         k = ins.IA + 2
         p = self._p
         p[k, :] = 0.0
         p[:, k] = 0.0
         p[k, k] = yaw_sigma_rad**2
         for snap in self._hist:
-            snap.q_nb = ins.rotate_by_psi(snap.q_nb, np.array([0.0, 0.0, turn]))
+            snap.q_nb = ins.rotate_by_rotvec(snap.q_nb, 0.0, 0.0, turn)
         log.info("heading restarted from the taxi correction: turned %.3f deg", math.degrees(turn))
 
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
@@ -470,13 +490,14 @@ class BlendNavigator:
         estimated correction), carried by the gyro to the newest IMU time.
         Strapdown mode: used only to initialise.
         """
-        vals = (sample.roll_rad, sample.pitch_rad, sample.yaw_rad, yaw_correction_rad)
-        if not all(math.isfinite(v) for v in vals):
+        roll, pitch, yaw = sample.roll_rad, sample.pitch_rad, sample.yaw_rad
+        isfinite = math.isfinite
+        if not (
+            isfinite(roll) and isfinite(pitch) and isfinite(yaw) and isfinite(yaw_correction_rad)
+        ):
             self._reject("attitude_not_finite")
             return
-        self._att_q = _euler_to_quat(
-            sample.roll_rad, sample.pitch_rad, sample.yaw_rad - yaw_correction_rad
-        )
+        self._att_q = _euler_to_quat(roll, pitch, yaw - yaw_correction_rad)
         self._att_t_s = sample.t_s
         if self._init and not self._strapdown:
             mech = self._mech
@@ -486,7 +507,8 @@ class BlendNavigator:
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
         """Gate and fuse one fix at its own time; carry the correction to the newest IMU time."""
         cfg = self.config
-        if not (all(map(math.isfinite, meas.pos_ned_m.tolist())) and math.isfinite(meas.t_s)):
+        z_pos = meas.pos_ned_m.tolist()
+        if not (all(map(math.isfinite, z_pos)) and math.isfinite(meas.t_s)):
             return self._refuse(meas, "position_not_finite")
         r_pos_rep, r_vel_rep = self._reported_variances(meas)
         if not self._init:
@@ -499,8 +521,10 @@ class BlendNavigator:
         if math.isfinite(self._last_fuse_t_s) and meas.t_s <= self._last_fuse_t_s - 1e-9:
             return self._refuse(meas, "fix_out_of_order")
 
+        # per-fix vectors of 3 to 6 components are Python floats here (a numpy call costs
+        # more than the arithmetic); the same operations as the array forms, so the same values
         scale = self._r_scale()
-        r_pos_scaled = r_pos_rep * scale[:3]
+        r_pos_scaled = [r * k for r, k in zip(r_pos_rep, scale, strict=True)]
         self._gnss_error_block(meas.fix_type, r_pos_scaled)
         idx, pos_m, vel_m, q_m = self._state_at(meas.t_s)
         snap = self._hist[idx]
@@ -511,18 +535,21 @@ class BlendNavigator:
             # (negligible in steady flight, not while the velocity is uncertain: after the
             # first fix, where GPS_RAW_INT gives no vertical velocity, and after an outage)
             p_m = _carry_pos_vel(p_m, dt_p, self.diag.accel_psd_ned)
-        mat_nb = ins.quat_to_mat(q_m)
-        rows, y, h_mat, r_rep = self._measurement(meas, pos_m, vel_m, mat_nb, r_pos_rep, r_vel_rep)
+        axes, y, h_mat, r_rep = self._measurement(
+            meas, z_pos, pos_m, vel_m, q_m, r_pos_rep, r_vel_rep
+        )
         if self._gm:  # the white part of the position noise; the rest is in states 15:18
             r_rep[:3] = self._white_part(r_pos_rep)
-        r_diag = r_rep * scale[rows]
-        dof = len(rows)
+        # the adaptive scale is on the position components (the velocity components' is 1)
+        r_diag = [r_rep[0] * scale[0], r_rep[1] * scale[1], r_rep[2] * scale[2], *r_rep[3:]]
+        dof = len(y)
         threshold = self._gates[dof]
+        y_arr = np.array(y)
         try:
-            corr = joseph_update_diag_r(p_m, y, h_mat, r_diag)
+            corr = joseph_update_diag_r(p_m, y_arr, h_mat, np.array(r_diag))
         except ValueError:
             return self._refuse(meas, "innovation_cov_not_pd")
-        innov_pos = -y[:3]
+        innov_pos = -y_arr[:3]
         s_pos = corr.innov_cov[:3, :3]
         self.diag.last_nis = corr.nis
         self.diag.last_dof = dof
@@ -531,18 +558,21 @@ class BlendNavigator:
             log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, corr.nis, threshold)
             return GnssUpdate(meas.t_s, False, corr.nis, dof, threshold, innov_pos, s_pos, "gate")
 
+        d = corr.dx.tolist()
         if cfg.adaptive:
-            self._adapt(y, h_mat, r_rep, p_m, corr, meas.t_s)
-        r_used = np.full(6, np.nan)
-        r_used[rows] = r_diag
-        r_used[:3] = r_pos_scaled
-        self.diag.r_used = r_used
+            self._adapt(y, axes, h_mat, r_rep, p_m, corr, d, meas.t_s)
+        r_used = [*r_pos_scaled, math.nan, math.nan, math.nan]
+        for k, axis in enumerate(axes):
+            r_used[3 + axis] = r_diag[3 + k]
+        self.diag.r_used = np.array(r_used)
         # the correction is for the fix time; injected at the snapshot, its position part
         # moves with its velocity part over the time between them (a 2 m/s correction
         # 0.05 s away would otherwise plant 0.1 m of position error)
-        dx = corr.dx.copy()
-        dx[0:3] += (snap.t_s - meas.t_s) * dx[3:6]
-        self._apply(idx, dx, corr.p_post)
+        lag = snap.t_s - meas.t_s
+        d[0] += lag * d[3]
+        d[1] += lag * d[4]
+        d[2] += lag * d[5]
+        self._apply(idx, d, corr.p_post)
         self._last_fuse_t_s = meas.t_s
         self.diag.fused += 1
         return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
@@ -555,17 +585,7 @@ class BlendNavigator:
         dt = max(0.0, t_s - mech.t_s)
         # covariance at the newest IMU time: the last propagated P plus the open segment
         dt_p = max(0.0, t_s - self._hist[-1].t_s)
-        p = self._p
-        psd = self.diag.accel_psd_ned
-        pvv = p[3:6, 3:6]
-        p_pos = p[0:3, 3:6] + p[3:6, 0:3]
-        p_pos *= dt_p
-        p_pos += p[0:3, 0:3]
-        p_pos += dt_p**2 * pvv
-        p_vel = pvv.copy()
-        # the white acceleration noise, on the diagonals (views of the (3, 3) arrays)
-        p_pos.reshape(-1)[::4] += psd * dt_p**3 / 3.0
-        p_vel.reshape(-1)[::4] += psd * dt_p
+        cov = _open_segment_cov(self._p[0:6, 0:6].tolist(), self.diag.accel_psd_ned.tolist(), dt_p)
         w, x, y, z = mech.q_nb
         yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
         vn, ve, vd = mech.vel
@@ -581,10 +601,10 @@ class BlendNavigator:
                 + (1 - 2 * (x * x + y * y)) * (g[2] - bg[2])
             )
             yaw = wrap_pi(yaw + yaw_rate * dt)
-        pos = np.array((pn + vn * dt, pe + ve * dt, pd + vd * dt))
-        p_sym = p_pos + p_pos.T
-        p_sym *= 0.5
-        return NavState(t_s, pos, np.array((vn, ve, vd)), p_sym, p_vel, yaw)
+        # one array each for the vectors and the covariances (views of them in the state)
+        pos_vel = np.array((pn + vn * dt, pe + ve * dt, pd + vd * dt, vn, ve, vd))
+        cov_pv = np.array(cov).reshape(2, 3, 3)
+        return NavState(t_s, pos_vel[0:3], pos_vel[3:6], cov_pv[0], cov_pv[1], yaw)
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express the state in ``new`` (position through geodetic, vectors rotated)."""
@@ -602,13 +622,14 @@ class BlendNavigator:
         q_rot = _mat_to_quat(rot)
         mech.q_nb = ins.quat_normalise(ins.quat_mul(q_rot, mech.q_nb))
         t = np.eye(N_STATE)
-        self._gb = rot @ self._gb
+        self._gb = (rot @ np.array(self._gb)).tolist()
         for k in (ins.IP, ins.IV, ins.IA, IGB):
             t[k : k + 3, k : k + 3] = rot
         self._p = t @ self._p @ t.T
         self._att_corr = ins.quat_normalise(ins.quat_mul(q_rot, self._att_corr))
-        pos, vel = mech.state_vectors()
-        self._hist = deque([_Snapshot(mech.t_s, pos, vel, mech.q_nb, self._p)])
+        self._hist = deque(
+            [_Snapshot(mech.t_s, tuple(mech.pos), tuple(mech.vel), mech.q_nb, self._p)]
+        )
         self._last_fuse_t_s = math.nan
 
     # ------------------------------------------------------------------ diagnostics
@@ -680,43 +701,40 @@ class BlendNavigator:
             g[IGB : IGB + 3] = 2.0 * self._gb_var / self._gb_tau
         return g
 
-    def _f_mat(self, f_ned: FloatArray, mat_nb: FloatArray) -> FloatArray:
-        """F (15, 15) of :func:`companion.nav.ins.error_model_f`, filled into a template."""
-        f = self._f_template.copy()
-        f[3, 7] = -f_ned[2]
-        f[3, 8] = f_ned[1]
-        f[4, 6] = f_ned[2]
-        f[4, 8] = -f_ned[0]
-        f[5, 6] = -f_ned[1]
-        f[5, 7] = f_ned[0]
-        f[3:6, 9:12] = -mat_nb
+    def _f_filled(self, f_ned: Vec3, mat_nb: Mat3Values) -> FloatArray:
+        """F (18, 18) of :func:`companion.nav.ins.error_model_f` (and the receiver-error
+        block), filled in place into the preallocated template and returned (a view that
+        the next call overwrites). ``mat_nb`` is row-major (9 floats)."""
+        f0, f1, f2 = f_ned
+        c00, c01, c02, c10, c11, c12, c20, c21, c22 = mat_nb
+        values = [-f2, f1, f2, -f0, -f1, f0, -c00, -c01, -c02, -c10, -c11, -c12, -c20, -c21, -c22]
         if self._strapdown:
-            f[6:9, 12:15] = mat_nb
-        return f
-
-    def _discretise(self, f_mat: FloatArray, dt_s: float) -> tuple[FloatArray, FloatArray]:
-        if self.config.cov_discretisation == "van_loan":
-            return van_loan(f_mat, np.diag(self._gqg), dt_s)
-        return discretise_second_order(f_mat, self._gqg, dt_s)
+            values += mat_nb
+        # one indexed assignment instead of a dozen element writes
+        self._f_flat[self._f_idx] = values
+        return self._f_template
 
     def _close_segment(self) -> None:
         """Propagate P over the accumulated segment and push a snapshot."""
         mech = self._mech
-        dt, f_ned = mech.take_segment()
+        dt, f_ned = mech.take_segment_values()
         snap = self._hist[-1]
-        mat_nb = ins.quat_to_mat(mech.q_nb)
-        phi, qd = self._discretise(self._f_mat(f_ned, mat_nb), dt)
+        mat_nb = ins.quat_to_mat_values(mech.q_nb)
+        f_mat = self._f_filled(f_ned, mat_nb)
+        if self._van_loan:
+            phi, qd = van_loan(f_mat, np.diag(self._gqg), dt)
+        else:
+            phi, qd = discretise_second_order(f_mat, self._gqg, dt)
         snap.phi, snap.qd = phi, qd
         self._p = predict_covariance(self._p, phi, qd)
-        pos, vel = mech.state_vectors()
-        self._hist.append(_Snapshot(mech.t_s, pos, vel, mech.q_nb, self._p))
+        self._hist.append(_Snapshot(mech.t_s, tuple(mech.pos), tuple(mech.vel), mech.q_nb, self._p))
         horizon = mech.t_s - self.config.history_s
         while len(self._hist) > 2 and self._hist[1].t_s <= horizon:
             self._hist.popleft()
 
-    def _state_at(self, t_s: float) -> tuple[int, FloatArray, FloatArray, ins.Quat]:
-        """Nominal position, velocity and attitude interpolated at ``t_s``, and the index of
-        the snapshot nearest in time (whose covariance the fix is fused with)."""
+    def _state_at(self, t_s: float) -> tuple[int, list[float], list[float], ins.Quat]:
+        """Nominal position, velocity (3 floats each) and attitude interpolated at ``t_s``, and
+        the index of the snapshot nearest in time (whose covariance the fix is fused with)."""
         hist = self._hist
         mech = self._mech
         n = len(hist)
@@ -724,175 +742,201 @@ class BlendNavigator:
         while j > 0 and hist[j].t_s > t_s:
             j -= 1
         s0 = hist[j]
+        s1_pos: Sequence[float]
+        s1_vel: Sequence[float]
         if j + 1 < n:
             s1 = hist[j + 1]
             s1_t, s1_pos, s1_vel, s1_q = s1.t_s, s1.pos, s1.vel, s1.q_nb
         else:
-            s1_t = mech.t_s
-            s1_pos, s1_vel = mech.state_vectors()
-            s1_q = mech.q_nb
+            s1_t, s1_pos, s1_vel, s1_q = mech.t_s, mech.pos, mech.vel, mech.q_nb
         h = s1_t - s0.t_s
         u = min(max((t_s - s0.t_s) / h, 0.0), 1.0) if h > 1e-9 else 1.0
         # cubic Hermite position from the end velocities; velocity linear
-        h00 = 2 * u**3 - 3 * u**2 + 1
-        h10 = u**3 - 2 * u**2 + u
-        h01 = -2 * u**3 + 3 * u**2
-        h11 = u**3 - u**2
-        a, b, c, d = h00, h10 * h, h01, h11 * h
-        p0, v0, p1, v1 = s0.pos.tolist(), s0.vel.tolist(), s1_pos.tolist(), s1_vel.tolist()
-        pos = np.array([a * p0[i] + b * v0[i] + c * p1[i] + d * v1[i] for i in range(3)])
+        u2, u3 = u**2, u**3
+        a = 2 * u3 - 3 * u2 + 1
+        b = (u3 - 2 * u2 + u) * h
+        c = -2 * u3 + 3 * u2
+        d = (u3 - u2) * h
+        p0, v0, p1, v1 = s0.pos, s0.vel, s1_pos, s1_vel
         w0 = 1.0 - u
-        vel = np.array([w0 * v0[i] + u * v1[i] for i in range(3)])
+        pos = [
+            a * p0[0] + b * v0[0] + c * p1[0] + d * v1[0],
+            a * p0[1] + b * v0[1] + c * p1[1] + d * v1[1],
+            a * p0[2] + b * v0[2] + c * p1[2] + d * v1[2],
+        ]
+        vel = [w0 * v0[0] + u * v1[0], w0 * v0[1] + u * v1[1], w0 * v0[2] + u * v1[2]]
         if u >= 0.5 and j + 1 < n:
             return j + 1, pos, vel, s1_q
         return j, pos, vel, (s0.q_nb if u < 0.5 else s1_q)
 
-    def _white_part(self, r_pos: FloatArray) -> FloatArray:
-        """White share of the reported position variance (floored), (3,)."""
-        return np.maximum(self.config.gnss_white_fraction * r_pos, self._pos_floor)
+    def _white_part(self, r_pos: Sequence[float]) -> list[float]:
+        """White share of the reported position variance (floored), 3 floats."""
+        frac = self.config.gnss_white_fraction
+        f0, f1, f2 = self._pos_floor_t
+        return [max(frac * r_pos[0], f0), max(frac * r_pos[1], f1), max(frac * r_pos[2], f2)]
 
-    def _gnss_error_block(self, fix_type: FixType, var: FloatArray) -> None:
-        """Keep the receiver-error states in step with the fix: variance ``var`` (3,) and the
-        fix type's correlation time; re-initialise them when the fix type changes or the
+    def _gnss_error_block(self, fix_type: FixType, var: list[float]) -> None:
+        """Keep the receiver-error states in step with the fix: variance ``var`` (3 floats) and
+        the fix type's correlation time; re-initialise them when the fix type changes or the
         variance jumps by more than 4x (a new error regime, uncorrelated with the old)."""
         if not self._gm:
             return
-        old = self._gb_var.tolist()
-        new = var.tolist()
-        jump = self._gb_fix is not None and any(
-            v > 4.0 * o or v < 0.25 * o for v, o in zip(new, old, strict=True)
-        )
-        if fix_type != self._gb_fix or jump:
+        old = self._gb_var_l
+        jump = False
+        small_change = True
+        for v, o in zip(var, old, strict=True):
+            if v > 4.0 * o or v < 0.25 * o:
+                jump = True
+            if abs(v - o) > 0.05 * o:
+                small_change = False
+        if fix_type != self._gb_fix or (jump and self._gb_fix is not None):
             tau = self.config.gnss_err_tau_s or GNSS_ERR_TAU_S.get(fix_type, 300.0)
             self._gb_fix = fix_type
             self._gb_tau = tau
-            self._gb = np.zeros(3)
+            self._gb = [0.0, 0.0, 0.0]
             self._f_template[IGB : IGB + 3, IGB : IGB + 3] = -np.eye(3) / tau
+            var_block = np.diag(var)
             for p in [self._p] + [snap.p_mat for snap in self._hist]:
                 p[IGB : IGB + 3, :] = 0.0
                 p[:, IGB : IGB + 3] = 0.0
-                p[IGB : IGB + 3, IGB : IGB + 3] = np.diag(var)
-            self._gb_var = var.copy()
-            self._gqg = self._make_gqg()
-        elif any(abs(v - o) > 0.05 * o for v, o in zip(new, old, strict=True)):
-            self._gb_var = var.copy()
-            self._gqg = self._make_gqg()
+                p[IGB : IGB + 3, IGB : IGB + 3] = var_block
+            self._set_gb_var(var)
+        elif not small_change:
+            self._set_gb_var(var)
 
-    def _reported_variances(self, meas: GnssMeasurement) -> tuple[FloatArray, FloatArray]:
-        """Position and velocity variances (3,) each: reported, else fallback, then floored."""
-        cfg = self.config
-        h_std, v_std = FALLBACK_STD_M.get(meas.fix_type, (10.0, 15.0))
-        fallback = (h_std**2, h_std**2, v_std**2)
-        floor = self._pos_floor_t
-        r_pos = [
-            max(r if (math.isfinite(r) and r > 0.0) else fb, fl)
-            for r, fb, fl in zip(meas.pos_var_ned_m2.tolist(), fallback, floor, strict=True)
-        ]
-        vel_fb = cfg.vel_std_fallback_mps**2
-        vel_fl = cfg.vel_std_floor_mps**2
-        r_vel = [
-            max(r if (math.isfinite(r) and r > 0.0) else vel_fb, vel_fl)
-            for r in meas.vel_var_ned_m2ps2.tolist()
-        ]
-        return np.array(r_pos), np.array(r_vel)
+    def _set_gb_var(self, var: list[float]) -> None:
+        self._gb_var = np.array(var)
+        self._gb_var_l = list(var)
+        self._gqg = self._make_gqg()
+
+    def _reported_variances(self, meas: GnssMeasurement) -> tuple[list[float], list[float]]:
+        """Position and velocity variances (3 floats each): reported, else fallback, floored."""
+        fallback = self._pos_fallback.get(meas.fix_type, self._pos_fallback_other)
+        r_pos = meas.pos_var_ned_m2.tolist()
+        for i, (fb, fl) in enumerate(zip(fallback, self._pos_floor_t, strict=True)):
+            r = r_pos[i]
+            r_pos[i] = max(r if (math.isfinite(r) and r > 0.0) else fb, fl)
+        vel_fb, vel_fl = self._vel_fallback_floor
+        r_vel = meas.vel_var_ned_m2ps2.tolist()
+        for i, r in enumerate(r_vel):
+            r_vel[i] = max(r if (math.isfinite(r) and r > 0.0) else vel_fb, vel_fl)
+        return r_pos, r_vel
 
     def _measurement(
         self,
         meas: GnssMeasurement,
-        pos: FloatArray,
-        vel: FloatArray,
-        mat_nb: FloatArray,
-        r_pos: FloatArray,
-        r_vel: FloatArray,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Rows used, y = h(x_hat) - z (m,), H (m, 18) (read-only), reported R diagonal (m,)."""
-        vel_z = np.asarray(meas.vel_ned_mps, dtype=float)
-        vel_ok = np.isfinite(vel_z)
-        key = tuple(vel_ok.tolist())
+        z_pos: list[float],
+        pos: list[float],
+        vel: list[float],
+        q_nb: ins.Quat,
+        r_pos: list[float],
+        r_vel: list[float],
+    ) -> tuple[tuple[int, ...], list[float], FloatArray, list[float]]:
+        """Velocity axes used, y = h(x_hat) - z (m floats: 3 position components, then the
+        velocity axes), H (m, 18) (read-only), reported R diagonal (m floats)."""
+        vel_z = meas.vel_ned_mps.tolist()
+        key = (math.isfinite(vel_z[0]), math.isfinite(vel_z[1]), math.isfinite(vel_z[2]))
         cached = self._h_cache.get(key)
         if cached is None:
-            rows_c = np.concatenate([np.arange(3), 3 + np.flatnonzero(vel_ok)])
-            h_c = np.zeros((len(rows_c), N_STATE))
+            axes_c = tuple(i for i in range(3) if key[i])
+            h_c = np.zeros((3 + len(axes_c), N_STATE))
             h_c[0:3, ins.IP : ins.IP + 3] = np.eye(3)
             if self._gm:
                 h_c[0:3, IGB : IGB + 3] = np.eye(3)
-            for k, axis in enumerate(np.flatnonzero(vel_ok)):
+            for k, axis in enumerate(axes_c):
                 h_c[3 + k, ins.IV + axis] = 1.0
             h_c.flags.writeable = False  # shared between fixes
-            cached = (rows_c, h_c, rows_c[3:] - 3)
+            cached = (axes_c, h_c)
             self._h_cache[key] = cached
-        rows, h_mat, axes = cached
-        m = len(rows)
-        pos_ant = pos
-        vel_ant = vel
+        axes, h_mat = cached
+        pos_ant: Sequence[float] = pos
+        vel_ant: Sequence[float] = vel
         if self._has_lever:
+            mat_nb = ins.quat_to_mat(q_nb)
             lever_n = mat_nb @ self._lever
-            pos_ant = pos + lever_n
+            pos_ant = (np.array(pos) + lever_n).tolist()
             h_mat = h_mat.copy()
             h_mat[0:3, ins.IA : ins.IA + 3] = skew(lever_n)
             omega = np.array(self._mech.last_gyro_b_radps) - np.array(self._mech.bg)
-            vel_ant = vel + mat_nb @ np.cross(omega, self._lever)
-        y = np.empty(m)
-        y[0:3] = pos_ant + self._gb - meas.pos_ned_m
-        r_rep = np.empty(m)
-        r_rep[0:3] = r_pos
-        y[3:] = vel_ant[axes] - vel_z[axes]
-        r_rep[3:] = r_vel[axes]
-        return rows, y, h_mat, r_rep
+            vel_ant = (np.array(vel) + mat_nb @ np.cross(omega, self._lever)).tolist()
+        gb = self._gb
+        y = [(pos_ant[i] + gb[i]) - z_pos[i] for i in range(3)]
+        y += [vel_ant[a] - vel_z[a] for a in axes]
+        r_rep = r_pos + [r_vel[a] for a in axes]
+        return axes, y, h_mat, r_rep
 
-    def _r_scale(self) -> FloatArray:
-        """Adaptive variance scale per component (ones when not adaptive or not ready)."""
+    def _r_scale(self) -> list[float]:
+        """Adaptive variance scale per position component (ones when not adaptive or not
+        ready); the velocity components' scale is 1."""
         cfg = self.config
         if not cfg.adaptive:
-            return np.ones(6)
+            return [1.0, 1.0, 1.0]
         lo, hi = cfg.r_scale_bounds
-        win = self._r_win
+        ready_mean = self._r_win.ready_mean
         min_epochs = cfg.adaptive_min_epochs
-        values = [
-            min(max(win.mean(i), lo), hi) if win.count(i) >= min_epochs else 1.0 for i in range(3)
-        ]
-        scale = np.array(values + [1.0, 1.0, 1.0])
-        self.diag.r_scale = scale
-        return scale
+        values = [1.0, 1.0, 1.0]
+        for i in range(3):
+            mean = ready_mean(i, min_epochs)
+            if mean is not None:
+                values[i] = min(max(mean, lo), hi)
+        if values != self._r_scale_last:  # a new array only when the scale changes
+            self.diag.r_scale = np.array(values + [1.0, 1.0, 1.0])
+            self._r_scale_last = values
+        return values
 
     def _adapt(
         self,
-        y: FloatArray,
+        y: list[float],
+        axes: tuple[int, ...],
         h_mat: FloatArray,
-        r_rep: FloatArray,
+        r_rep: list[float],
         p_prior: FloatArray,
         corr: Correction,
+        d: list[float],
         t_s: float,
     ) -> None:
         """Window the residual-form R statistics and the Q correction K (eta eta^T - S) K^T.
 
         For the optimal gain K S K^T = P- - P+, so the velocity diagonal of the Q
         correction is dx_v^2 - (P- - P+)_vv (dx = K eta): no extra matrix products.
+        ``d`` is ``corr.dx`` as floats.
         """
         cfg = self.config
-        dx, p_post = corr.dx, corr.p_post
-        h3 = h_mat[:3]
-        resid = (y[:3] - h3 @ dx).tolist()
-        if self._has_lever or self._gm:
-            hph = ((h3 @ p_post) * h3).sum(axis=1).tolist()
+        p_post = corr.p_post
+        diag = p_post.diagonal().tolist()
+        if self._has_lever:
+            h3 = h_mat[:3]
+            resid = (np.array(y[:3]) - h3.dot(corr.dx)).tolist()
+            hph = ((h3.dot(p_post)) * h3).sum(axis=1).tolist()
+        elif self._gm:
+            # H's position rows select states i and IGB + i: H dx and diag(H P+ H^T) written
+            # out (the same two- and four-term sums as the matrix products, same values;
+            # P+ is exactly symmetric, so P+[IGB + i, i] is the offset diagonal's entry)
+            off = p_post.diagonal(IGB).tolist()
+            resid = [y[i] - (d[i] + d[IGB + i]) for i in range(3)]
+            hph = [(diag[i] + off[i]) + (off[i] + diag[IGB + i]) for i in range(3)]
         else:
-            hph = p_post.diagonal()[:3].tolist()
-        r3 = r_rep[:3].tolist()
+            resid = [y[i] - d[i] for i in range(3)]
+            hph = diag[0:3]
         r_add = self._r_win.add
         for k in range(3):  # position rows come first
-            r_add(k, (resid[k] ** 2 + hph[k]) / r3[k])
+            r_add(k, (resid[k] ** 2 + hph[k]) / r_rep[k])
         # Q: velocity block of K (eta eta^T - S) K^T per unit time, added to the PSD in use
         if not (math.isfinite(self._last_fuse_t_s) and t_s > self._last_fuse_t_s):
             return
         dt = t_s - self._last_fuse_t_s
-        dp = (p_prior.diagonal()[3:6] - p_post.diagonal()[3:6]).tolist()
-        dxv = dx[3:6].tolist()
+        dp = [p_prior.item(k, k) - diag[k] for k in (3, 4, 5)]
+        dxv = d[3:6]
         # an unmodelled noise dQ shows in dx_v only through the part of the velocity error
         # the update removes, (K H)_vv: the raw K (eta eta^T - S) K^T sees dQ (K H)_vv^2
         # (worst on the down axis, which GPS_RAW_INT observes through position only);
         # dividing by it makes the increment unbiased. Floored: an axis the fix barely
-        # observes cannot say much about its noise.
-        kh = (corr.gain[3:6] * h_mat[:, 3:6].T).sum(axis=1).tolist()
+        # observes cannot say much about its noise. H's velocity rows select the velocity
+        # axes measured, so (K H)_vv is the gain's entry of that row (0 for an axis absent).
+        kh = [0.0, 0.0, 0.0]
+        gain = corr.gain
+        for k, axis in enumerate(axes):
+            kh[axis] = gain.item(ins.IV + axis, 3 + k)
         psd = self.diag.accel_psd_ned.tolist()
         lo, hi = cfg.q_scale_bounds
         q0 = self._accel_psd0
@@ -904,52 +948,58 @@ class BlendNavigator:
         for i in range(3):
             kh2 = max(kh[i], _KH_FLOOR) ** 2
             q_win.add(i, psd[i] + (dxv[i] ** 2 - dp[i]) / (dt * kh2))
-            if q_win.count(i) >= min_epochs:
-                new[i] = min(max(q_win.mean(i), q_lo), q_hi)
+            mean = q_win.ready_mean(i, min_epochs)
+            if mean is not None:
+                new[i] = min(max(mean, q_lo), q_hi)
                 if abs(new[i] - psd[i]) > 1e-3 * psd[i]:
                     changed = True
         if changed:
             self.diag.accel_psd_ned = np.array(new)
             self._gqg = self._make_gqg()
 
-    def _apply(self, idx: int, dx: FloatArray, p_post: FloatArray) -> None:
-        """Carry a correction made at snapshot ``idx`` to the newest IMU time through the
-        buffered transitions, correcting the snapshots on the way and the nominal state."""
+    def _apply(self, idx: int, d: list[float], p_post: FloatArray) -> None:
+        """Carry a correction ``d`` (floats) made at snapshot ``idx`` to the newest IMU time
+        through the buffered transitions, correcting the snapshots on the way and the
+        nominal state."""
         hist = self._hist
         mech = self._mech
         hist[idx].p_mat = p_post
-        _inject_snapshot(hist[idx], dx)
+        _inject_snapshot(hist[idx], d)
         p = p_post
-        for i in range(idx, len(hist) - 1):
-            s = hist[i]
-            if s.phi is None or s.qd is None:
-                raise ValueError("history segment without a transition")
-            dx = s.phi @ dx
-            p = predict_covariance(p, s.phi, s.qd)
-            hist[i + 1].p_mat = p
-            _inject_snapshot(hist[i + 1], dx)
-        self._p = p
-        # the open segment (shorter than cov_interval_s): first-order carry
+        last = len(hist) - 1
         dt_open = mech.seg_dt_s
-        if dt_open > 0.0:
-            f_ned = np.array(mech.seg_fn_sum) / dt_open
-            f_dx = self._f_mat(f_ned, ins.quat_to_mat(mech.q_nb)) @ dx
-            f_dx *= dt_open
-            dx = dx + f_dx
-        mech.inject(dx)
-        self._inject_attitude_corr(dx)
-        if self._gm:
-            self._gb = self._gb - dx[IGB : IGB + 3]
-
-    def _inject_attitude_corr(self, dx: FloatArray) -> None:
+        if idx < last or dt_open > 0.0:
+            dx = np.array(d)
+            for i in range(idx, last):
+                s = hist[i]
+                if s.phi is None or s.qd is None:
+                    raise ValueError("history segment without a transition")
+                dx = s.phi @ dx  # (a Van Loan phi is a strided view: kept as @)
+                p = predict_covariance(p, s.phi, s.qd)
+                hist[i + 1].p_mat = p
+                _inject_snapshot(hist[i + 1], dx.tolist())
+            # the open segment (shorter than cov_interval_s): first-order carry
+            if dt_open > 0.0:
+                sm = mech.seg_fn_sum
+                f_ned = (sm[0] / dt_open, sm[1] / dt_open, sm[2] / dt_open)
+                f_dx = self._f_filled(f_ned, ins.quat_to_mat_values(mech.q_nb)).dot(dx)
+                f_dx *= dt_open
+                dx = dx + f_dx
+            d = dx.tolist()
+        self._p = p
+        mech.inject_values(d)
         if not self._strapdown:
-            self._att_corr = ins.rotate_by_psi(self._att_corr, dx[ins.IA : ins.IA + 3])
+            self._att_corr = ins.rotate_by_rotvec(self._att_corr, d[6], d[7], d[8])
+        if self._gm:
+            gb = self._gb
+            self._gb = [gb[0] - d[IGB], gb[1] - d[IGB + 1], gb[2] - d[IGB + 2]]
 
     def _initialise(
-        self, meas: GnssMeasurement, r_pos: FloatArray, r_vel: FloatArray
+        self, meas: GnssMeasurement, r_pos_l: list[float], r_vel_l: list[float]
     ) -> GnssUpdate:
         """Start from the first fix and the latest attitude, at the newest IMU time."""
         cfg = self.config
+        r_pos, r_vel = np.array(r_pos_l), np.array(r_vel_l)
         if self._att_q is None:
             return self._refuse(meas, "no_attitude_yet")
         pre = self._pre_imu
@@ -979,9 +1029,9 @@ class BlendNavigator:
             # receiver-error state error = -b (the estimate starts at 0)
             self._p = p
             self._hist.clear()
-            self._gnss_error_block(meas.fix_type, r_pos)
+            self._gnss_error_block(meas.fix_type, r_pos_l)
             var = self._gb_var
-            p[0:3, 0:3] = np.diag(var + self._white_part(r_pos))
+            p[0:3, 0:3] = np.diag(var + np.array(self._white_part(r_pos_l)))
             p[0:3, IGB : IGB + 3] = -np.diag(var)
             p[IGB : IGB + 3, 0:3] = -np.diag(var)
         p[3:6, 3:6] = np.diag(var_v)
@@ -991,9 +1041,8 @@ class BlendNavigator:
         p[12:15, 12:15] = np.eye(3) * cfg.gyro_bias_sigma_radps**2
         self._p = p
         self._att_corr = (1.0, 0.0, 0.0, 0.0)
-        pos, vel_v = mech.state_vectors()
         self._hist.clear()
-        self._hist.append(_Snapshot(t0, pos, vel_v, mech.q_nb, p))
+        self._hist.append(_Snapshot(t0, tuple(mech.pos), tuple(mech.vel), mech.q_nb, p))
         self._init = True
         self._last_fuse_t_s = meas.t_s
         for t_s, acc, gyro in pre:
@@ -1030,10 +1079,12 @@ def _gm_psd(sigma: float, tau_s: float) -> float:
     return sigma**2 / _HOUR_S
 
 
-def _inject_snapshot(snap: _Snapshot, dx: FloatArray) -> None:
-    snap.pos = snap.pos - dx[ins.IP : ins.IP + 3]
-    snap.vel = snap.vel - dx[ins.IV : ins.IV + 3]
-    snap.q_nb = ins.rotate_by_psi(snap.q_nb, dx[ins.IA : ins.IA + 3])
+def _inject_snapshot(snap: _Snapshot, d: list[float]) -> None:
+    """Correct a snapshot's nominal state by the error-state correction ``d`` (floats)."""
+    p, v = snap.pos, snap.vel
+    snap.pos = (p[0] - d[0], p[1] - d[1], p[2] - d[2])
+    snap.vel = (v[0] - d[3], v[1] - d[4], v[2] - d[5])
+    snap.q_nb = ins.rotate_by_rotvec(snap.q_nb, d[6], d[7], d[8])
 
 
 def _mat_to_quat(mat: FloatArray) -> ins.Quat:
@@ -1060,6 +1111,71 @@ def _mat_to_quat(mat: FloatArray) -> ins.Quat:
     return ins.quat_normalise((q[0], q[1], q[2], q[3]))
 
 
+def _block(row: int, col: int) -> list[tuple[int, int]]:
+    """The (row, col) entries of the 3x3 block at ``row``, ``col``, row-major."""
+    return [(row + i, col + j) for i in range(3) for j in range(3)]
+
+
+def _flat_index(entries: list[tuple[int, int]]) -> npt.NDArray[np.intp]:
+    """Flat indices into an (N_STATE, N_STATE) array of (row, col) entries."""
+    return np.array([r * N_STATE + c for r, c in entries], dtype=np.intp)
+
+
+_F_VARIABLE_ENTRIES = [(3, 7), (3, 8), (4, 6), (4, 8), (5, 6), (5, 7)] + _block(3, 9)
+"""Entries of F that change per segment: skew(f) (off-diagonal) and -C (see _f_filled)."""
+_F_STRAPDOWN_ENTRIES = _block(6, 12)
+"""Strapdown: the C block of the attitude error's gyro-bias coupling."""
+
+
+def _open_segment_cov(b: list[list[float]], psd: list[float], dt_s: float) -> tuple[float, ...]:
+    """Position and velocity covariances carried ``dt_s`` through ``position += velocity dt``
+    with white acceleration noise of PSD ``psd`` (3 floats, m^2/s^3) from the 6x6
+    position/velocity block ``b`` (nested lists): 18 floats, the symmetrised position
+    covariance then the velocity covariance, row-major.
+
+    Per entry (i, j) of the position block: ((P_pv + P_vp) dt + P_pp) + dt^2 P_vv, plus
+    psd dt^3 / 3 on the diagonal, then (A + A^T) / 2; the velocity block gains psd dt on its
+    diagonal. Written out in floats (once per published state: a dozen numpy calls on 3x3
+    arrays cost more than the arithmetic); the same operations as the array form.
+    """
+    b0, b1, b2, b3, b4, b5 = b
+    q0, q1, q2 = psd
+    dt2 = dt_s**2
+    dt3 = dt_s**3
+    a00 = ((b0[3] + b3[0]) * dt_s + b0[0]) + dt2 * b3[3] + q0 * dt3 / 3.0
+    a01 = ((b0[4] + b3[1]) * dt_s + b0[1]) + dt2 * b3[4]
+    a02 = ((b0[5] + b3[2]) * dt_s + b0[2]) + dt2 * b3[5]
+    a10 = ((b1[3] + b4[0]) * dt_s + b1[0]) + dt2 * b4[3]
+    a11 = ((b1[4] + b4[1]) * dt_s + b1[1]) + dt2 * b4[4] + q1 * dt3 / 3.0
+    a12 = ((b1[5] + b4[2]) * dt_s + b1[2]) + dt2 * b4[5]
+    a20 = ((b2[3] + b5[0]) * dt_s + b2[0]) + dt2 * b5[3]
+    a21 = ((b2[4] + b5[1]) * dt_s + b2[1]) + dt2 * b5[4]
+    a22 = ((b2[5] + b5[2]) * dt_s + b2[2]) + dt2 * b5[5] + q2 * dt3 / 3.0
+    s01 = (a01 + a10) * 0.5
+    s02 = (a02 + a20) * 0.5
+    s12 = (a12 + a21) * 0.5
+    return (
+        (a00 + a00) * 0.5,
+        s01,
+        s02,
+        s01,
+        (a11 + a11) * 0.5,
+        s12,
+        s02,
+        s12,
+        (a22 + a22) * 0.5,
+        b3[3] + q0 * dt_s,
+        b3[4],
+        b3[5],
+        b4[3],
+        b4[4] + q1 * dt_s,
+        b4[5],
+        b5[3],
+        b5[4],
+        b5[5] + q2 * dt_s,
+    )
+
+
 _KH_FLOOR = 0.3
 """Smallest (K H)_vv the adaptive Q divides by (see BlendNavigator._adapt)."""
 
@@ -1071,14 +1187,20 @@ def _carry_pos_vel(p: FloatArray, dt_s: float, accel_psd_ned: FloatArray) -> Flo
     carried = p.copy()
     carried[0:3, :] += dt_s * p[3:6, :]  # Phi P: position rows gain dt x velocity rows
     carried[:, 0:3] += dt_s * carried[:, 3:6]  # (Phi P) Phi^T: the same for the columns
-    # the white acceleration noise on the diagonals of the four 3x3 blocks (flat views)
-    n = carried.shape[0]
-    flat = carried.reshape(-1)
-    step = n + 1
-    q_vv = accel_psd_ned * dt_s
-    q_pv = accel_psd_ned * dt_s**2 / 2.0
-    flat[0 : 3 * step : step] += accel_psd_ned * dt_s**3 / 3.0
-    flat[3 : 3 + 3 * step : step] += q_pv
-    flat[3 * n : 3 * n + 3 * step : step] += q_pv
-    flat[3 * step : 6 * step : step] += q_vv
+    # the white acceleration noise on the diagonals of the four 3x3 blocks, in one indexed
+    # add (the same per-element products as the array forms)
+    psd = accel_psd_ned.tolist()
+    q_pp = [q * dt_s**3 / 3.0 for q in psd]
+    q_pv = [q * dt_s**2 / 2.0 for q in psd]
+    q_vv = [q * dt_s for q in psd]
+    carried.reshape(-1)[_CARRY_NOISE_IDX] += q_pp + q_pv + q_pv + q_vv
     return carried
+
+
+_CARRY_NOISE_IDX = _flat_index(
+    [(i, i) for i in range(3)]
+    + [(i, 3 + i) for i in range(3)]
+    + [(3 + i, i) for i in range(3)]
+    + [(3 + i, 3 + i) for i in range(3)]
+)
+"""Flat indices of the diagonals of the position/velocity 3x3 blocks (see _carry_pos_vel)."""

@@ -36,6 +36,7 @@ SEEDS.md S1 (INS filter states), S2 (specific force as the motion model).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -98,13 +99,24 @@ def quat_normalise(q: Quat) -> Quat:
 
 def quat_to_mat(q: Quat) -> FloatArray:
     """Rotation matrix (3, 3) of a unit quaternion (``mat_nb`` for ``q_nb``)."""
+    return np.array(quat_to_mat_values(q)).reshape(3, 3)
+
+
+def quat_to_mat_values(
+    q: Quat,
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """The entries of :func:`quat_to_mat`, row-major, as 9 floats (no array for hot paths)."""
     w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
+    return (
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
     )
 
 
@@ -181,11 +193,11 @@ class Mechanisation:
         self.pos = [0.0, 0.0, 0.0]
         self.ba = [0.0, 0.0, 0.0]
         self.bg = [0.0, 0.0, 0.0]
-        self._last_acc: tuple[float, float, float] | None = None
-        self._last_gyro: tuple[float, float, float] | None = None
+        self._last_acc: Sequence[float] | None = None
+        self._last_gyro: Sequence[float] | None = None
         self.seg_dt_s = 0.0
         self.seg_fn_sum = [0.0, 0.0, 0.0]
-        self.last_gyro_b_radps = (0.0, 0.0, 0.0)
+        self.last_gyro_b_radps: Sequence[float] = (0.0, 0.0, 0.0)
         self._g_coef = gravity.coefficients(0.0)
         self._g_n = 0.0
 
@@ -210,15 +222,13 @@ class Mechanisation:
         self._g_n = self.pos[0]
         self._g_coef = self.gravity.coefficients(self._g_n)
 
-    def set_raw(self, acc: tuple[float, float, float], gyro: tuple[float, float, float]) -> None:
+    def set_raw(self, acc: Sequence[float], gyro: Sequence[float]) -> None:
         """Remember a reading without integrating (the first sample after a start)."""
         self._last_acc = acc
         self._last_gyro = gyro
         self.last_gyro_b_radps = gyro
 
-    def step(
-        self, t_s: float, acc: tuple[float, float, float], gyro: tuple[float, float, float]
-    ) -> None:
+    def step(self, t_s: float, acc: Sequence[float], gyro: Sequence[float]) -> None:
         """Integrate from ``self.t_s`` to ``t_s`` with one IMU reading (m/s^2, rad/s, body).
 
         Attitude: q <- q * exp(theta / 2), theta the bias-corrected trapezoid rotation vector.
@@ -294,37 +304,58 @@ class Mechanisation:
 
     def take_segment(self) -> tuple[float, FloatArray]:
         """Return and reset the accumulated (dt_s, mean NED specific force (3,))."""
+        dt, fn = self.take_segment_values()
+        return dt, np.array(fn)
+
+    def take_segment_values(self) -> tuple[float, tuple[float, float, float]]:
+        """:meth:`take_segment` with the mean specific force as 3 floats, m/s^2."""
         dt = self.seg_dt_s
-        fn = np.array(self.seg_fn_sum) / dt if dt > 0.0 else np.zeros(3)
+        sm = self.seg_fn_sum
+        fn = (sm[0] / dt, sm[1] / dt, sm[2] / dt) if dt > 0.0 else (0.0, 0.0, 0.0)
         self.seg_dt_s = 0.0
         self.seg_fn_sum = [0.0, 0.0, 0.0]
         return dt, fn
 
     def carry_attitude(self, q_nb: Quat, dt_s: float) -> Quat:
-        """``q_nb`` advanced by the last bias-corrected gyro reading over ``dt_s`` (may be < 0)."""
+        """``q_nb`` advanced by the last bias-corrected gyro reading over ``dt_s`` (may be < 0).
+
+        ``quat_normalise(quat_mul(q_nb, quat_from_rotvec(omega dt)))`` written out in one
+        body (the same operations; per attitude sample, so the calls are worth saving).
+        """
         g = self.last_gyro_b_radps
         bg = self.bg
-        return quat_normalise(
-            quat_mul(
-                q_nb,
-                quat_from_rotvec(
-                    (g[0] - bg[0]) * dt_s, (g[1] - bg[1]) * dt_s, (g[2] - bg[2]) * dt_s
-                ),
-            )
-        )
+        rx = (g[0] - bg[0]) * dt_s
+        ry = (g[1] - bg[1]) * dt_s
+        rz = (g[2] - bg[2]) * dt_s
+        ang = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if ang < 1e-8:
+            bw, bx, by, bz = 1.0 - ang * ang / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
+        else:
+            s = math.sin(0.5 * ang) / ang
+            bw, bx, by, bz = math.cos(0.5 * ang), rx * s, ry * s, rz * s
+        aw, ax, ay, az = q_nb
+        w = aw * bw - ax * bx - ay * by - az * bz
+        x = aw * bx + ax * bw + ay * bz - az * by
+        y = aw * by - ax * bz + ay * bw + az * bx
+        z = aw * bz + ax * by - ay * bx + az * bw
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        if w < 0.0:
+            n = -n
+        return (w / n, x / n, y / n, z / n)
 
     def inject(self, dx: FloatArray) -> None:
         """Apply an error-state correction (estimate minus truth convention), shape (15,)."""
-        d = dx.tolist()
+        self.inject_values(dx.tolist())
+
+    def inject_values(self, d: Sequence[float]) -> None:
+        """:meth:`inject` with the correction as a sequence of (at least 15) floats."""
         pos, vel, ba, bg = self.pos, self.vel, self.ba, self.bg
         for i in range(3):
             pos[i] -= d[IP + i]
             vel[i] -= d[IV + i]
             ba[i] -= d[IBA + i]
             bg[i] -= d[IBG + i]
-        self.q_nb = quat_normalise(
-            quat_mul(quat_from_rotvec(d[IA], d[IA + 1], d[IA + 2]), self.q_nb)
-        )
+        self.q_nb = rotate_by_rotvec(self.q_nb, d[IA], d[IA + 1], d[IA + 2])
 
     def state_vectors(self) -> tuple[FloatArray, FloatArray]:
         """Position and velocity as arrays, shape (3,) each."""
@@ -334,7 +365,30 @@ class Mechanisation:
 def rotate_by_psi(q_nb: Quat, psi_ned_rad: FloatArray) -> Quat:
     """Remove an attitude error ``psi``: C = (I + [psi x]) C_hat, as quaternions."""
     rx, ry, rz = np.asarray(psi_ned_rad, dtype=float).tolist()
-    return quat_normalise(quat_mul(quat_from_rotvec(rx, ry, rz), q_nb))
+    return rotate_by_rotvec(q_nb, rx, ry, rz)
+
+
+def rotate_by_rotvec(q_nb: Quat, rx: float, ry: float, rz: float) -> Quat:
+    """:func:`rotate_by_psi` with ``psi`` (rad, NED) as three floats.
+
+    ``quat_normalise(quat_mul(quat_from_rotvec(rx, ry, rz), q_nb))`` written out in one body
+    (the same operations; several times per fix, so the calls are worth saving).
+    """
+    ang = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if ang < 1e-8:
+        aw, ax, ay, az = 1.0 - ang * ang / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
+    else:
+        s = math.sin(0.5 * ang) / ang
+        aw, ax, ay, az = math.cos(0.5 * ang), rx * s, ry * s, rz * s
+    bw, bx, by, bz = q_nb
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    if w < 0.0:
+        n = -n
+    return (w / n, x / n, y / n, z / n)
 
 
 def error_model_f(
