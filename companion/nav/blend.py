@@ -749,6 +749,8 @@ class BlendNavigator:
             s1_t, s1_pos, s1_vel, s1_q = s1.t_s, s1.pos, s1.vel, s1.q_nb
         else:
             s1_t, s1_pos, s1_vel, s1_q = mech.t_s, mech.pos, mech.vel, mech.q_nb
+            if t_s > s1_t:
+                return j, *self._extrapolated(t_s)
         h = s1_t - s0.t_s
         u = min(max((t_s - s0.t_s) / h, 0.0), 1.0) if h > 1e-9 else 1.0
         # cubic Hermite position from the end velocities; velocity linear
@@ -768,6 +770,25 @@ class BlendNavigator:
         if u >= 0.5 and j + 1 < n:
             return j + 1, pos, vel, s1_q
         return j, pos, vel, (s0.q_nb if u < 0.5 else s1_q)
+
+    def _extrapolated(self, t_s: float) -> tuple[list[float], list[float], ins.Quat]:
+        """The state carried past the newest IMU sample to ``t_s``, for a fix ahead of it
+        (the IMU stream lags or has just stopped), with the mean acceleration of the
+        newest ~0.1 s of the history: at 60 m/s in a 3 m/s^2 turn, a 0.08 s lead left
+        uncarried is a 4.8 m position and a 0.24 m/s velocity innovation."""
+        mech = self._mech
+        ahead = t_s - mech.t_s
+        pos, vel = mech.pos, mech.vel
+        acc = [0.0, 0.0, 0.0]
+        for snap in reversed(self._hist):
+            span = mech.t_s - snap.t_s
+            if span > 0.5 * self._cov_interval_s:
+                acc = [(vel[i] - snap.vel[i]) / span for i in range(3)]
+                break
+        half = 0.5 * ahead * ahead
+        pos_t = [pos[i] + vel[i] * ahead + acc[i] * half for i in range(3)]
+        vel_t = [vel[i] + acc[i] * ahead for i in range(3)]
+        return pos_t, vel_t, mech.q_nb
 
     def _white_part(self, r_pos: Sequence[float]) -> list[float]:
         """White share of the reported position variance (floored), 3 floats."""
