@@ -252,6 +252,14 @@ class Engine:
             self.fallback = SingerNavigator(SingerConfig())
         self.navigator: Navigator = self.fallback
         """The navigator carrying the solution now (the blend, or the fallback)."""
+        self._fallback_backlog: deque[tuple[GnssMeasurement, bool]] = deque(
+            maxlen=FALLBACK_BACKLOG_FIXES
+        )
+        """Fixes (and their gate flags) the fallback has not taken yet: while the blend
+        carries the solution the fallback is fed when it is needed (it takes over, or the
+        frame moves), not at every fix, where its result would be thrown away."""
+        self._fallback_stale = False
+        """The backlog overflowed: the fallback restarts from the fixes it holds."""
         self._last_imu_t_s = -math.inf
         self.monitor = OutageMonitor(self._outage_config)
         self.integrity = IntegrityMonitor(self._integrity_config)
@@ -440,6 +448,8 @@ class Engine:
             outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
         if verdict.reinitialise:
+            self._fallback_backlog.clear()
+            self._fallback_stale = False
             for nav in self._navigators():
                 nav.reset()
                 nav.on_gnss(meas, gate=False)
@@ -452,13 +462,15 @@ class Engine:
             self._last_fused_fix = fix
             return outputs
         predicted = self._potential_reference(meas.t_s)
-        update = self.fallback.on_gnss(meas, gate=verdict.gate)
-        if self.primary is not None:
-            primary_update = self.primary.on_gnss(
-                meas, gate=verdict.gate and self.primary.initialised
-            )
-            if self.navigator is self.primary:
-                update = primary_update
+        primary = self.primary
+        if primary is not None and self.navigator is primary:
+            self._defer_to_fallback(meas, verdict.gate)
+            update = primary.on_gnss(meas, gate=verdict.gate)
+        else:
+            self._sync_fallback()
+            update = self.fallback.on_gnss(meas, gate=verdict.gate)
+            if primary is not None:
+                primary.on_gnss(meas, gate=verdict.gate and primary.initialised)
         if update.fused:
             self.stats.gnss["fused"] += 1
             self._last_fused_fix = fix
@@ -492,7 +504,33 @@ class Engine:
         chosen = primary if live and primary is not None else self.fallback
         if chosen is not self.navigator:
             log.info("navigator: %s", type(chosen).__name__)
+            if chosen is self.fallback:
+                self._sync_fallback()
             self.navigator = chosen
+
+    def _defer_to_fallback(self, meas: GnssMeasurement, gate: bool) -> None:
+        """Keep a fix for the fallback, which takes it when it is next needed."""
+        backlog = self._fallback_backlog
+        if len(backlog) == backlog.maxlen:
+            self._fallback_stale = True
+        backlog.append((meas, gate))
+
+    def _sync_fallback(self) -> None:
+        """Give the fallback the fixes it has not taken, in order, as it would have taken
+        them one by one (restarted from the oldest held when some were dropped: the
+        pass-through's state depends on the last fix and, through its vertical-velocity
+        average, on earlier ones with weights (1 - k)^n: below 1e-90 after a full backlog
+        with the default gain k = 0.3)."""
+        backlog = self._fallback_backlog
+        if not backlog:
+            return
+        fallback = self.fallback
+        if self._fallback_stale:
+            fallback.reset()
+            self._fallback_stale = False
+        for meas, gate in backlog:
+            fallback.on_gnss(meas, gate=gate)
+        backlog.clear()
 
     def _fuse_receiver(self, fix: GnssFix) -> bool:
         """Fuse the primary receiver; the other only while the primary is unusable."""
@@ -687,6 +725,7 @@ class Engine:
             return False
         lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
         new = LocalFrame(lat, lon, alt)
+        self._sync_fallback()  # the fixes it has not taken are in the old frame
         for nav in self._navigators():
             nav.shift_frame(self.frame, new)
         self.integrity.shift_frame(self.frame, new)
@@ -717,6 +756,9 @@ def _integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavS
         cov[axis, axis] = max(cov[axis, axis], floor**2)
     return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
 
+
+FALLBACK_BACKLOG_FIXES = 600
+"""Fixes held for the fallback while the blend runs (a minute of a 10 Hz receiver)."""
 
 _TICK_S = 0.05
 """Outage-clock resolution: GNSS_LOST is raised within this of its timeout."""

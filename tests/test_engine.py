@@ -189,3 +189,56 @@ def test_gnss_back_beyond_the_gate_reinitialises_instead_of_bridging_forever():
         line.pos_ned_m(last.t_s) + np.array([0.0, 500.0, 0.0])
     )
     assert np.linalg.norm(err) < 0.5
+
+
+def _imu_stops(stream, after_s):
+    """The stream with no IMU sample after ``after_s`` (absolute time)."""
+    from companion.types import ImuSample
+
+    for s in stream:
+        if isinstance(s, ImuSample) and s.t_s > after_s:
+            continue
+        yield s
+
+
+def _eager_fallback(engine):
+    """The engine with its fallback fed at every fix (the reference the lazy feed must match)."""
+    engine._defer_to_fallback = lambda meas, gate: engine.fallback.on_gnss(meas, gate=gate)
+    return engine
+
+
+@pytest.mark.parametrize("backlog", [None, 25])
+def test_the_fallback_fed_lazily_takes_over_as_if_fed_at_every_fix(backlog):
+    """While the blend carries the solution the pass-through fallback only collects the
+    fixes; when the IMU stops it must take over with the state it would have had if it
+    had taken every fix (exactly; after a backlog overflow, to the vertical velocity
+    average's remaining weight 0.7^25), and carry the flight on."""
+    from collections import deque
+
+    from companion.types import ImuSample
+
+    line = Line((30.0, 10.0, -2.0))
+    outs = {}
+    for name in ("lazy", "eager"):
+        engine = Engine(EngineConfig(navigator="blend", reanchor_distance_m=1000.0))
+        if backlog is not None:
+            engine._fallback_backlog = deque(maxlen=backlog)
+        if name == "eager":
+            _eager_fallback(engine)
+        noisy = line_stream(60.0, line=line, noise_m=0.02, seed=3)
+        _, outs[name] = run(_imu_stops(noisy, 40.0), engine)
+        assert engine.navigator is engine.fallback
+        assert engine.stats.reanchors >= 1  # the held fixes crossed a frame shift
+    lazy, eager = solutions(outs["lazy"]), solutions(outs["eager"])
+    assert [s.t_s for s in lazy] == [s.t_s for s in eager]
+    after = [(x, y) for x, y in zip(lazy, eager, strict=True) if x.t_s > 41.0]
+    assert len(after) > 100
+    for x, y in after:
+        if backlog is None:
+            assert (x.lat_rad, x.lon_rad, x.alt_msl_m) == (y.lat_rad, y.lon_rad, y.alt_msl_m)
+            assert np.array_equal(x.vel_ned_mps, y.vel_ned_mps)
+        else:
+            assert np.allclose(x.vel_ned_mps, y.vel_ned_mps, atol=0.7**25 * 5.0)
+        err = ORIGIN.lla_to_ned(x.lat_rad, x.lon_rad, x.alt_msl_m) - line.pos_ned_m(x.t_s)
+        assert np.linalg.norm(err) < 0.3
+    assert not any(isinstance(s, ImuSample) for s in [])  # the import is for the helper
