@@ -215,8 +215,6 @@ def test_the_fallback_fed_lazily_takes_over_as_if_fed_at_every_fix(backlog):
     average's remaining weight 0.7^25), and carry the flight on."""
     from collections import deque
 
-    from companion.types import ImuSample
-
     line = Line((30.0, 10.0, -2.0))
     outs = {}
     for name in ("lazy", "eager"):
@@ -226,12 +224,14 @@ def test_the_fallback_fed_lazily_takes_over_as_if_fed_at_every_fix(backlog):
         if name == "eager":
             _eager_fallback(engine)
         noisy = line_stream(60.0, line=line, noise_m=0.02, seed=3)
-        _, outs[name] = run(_imu_stops(noisy, 40.0), engine)
+        # the frame is re-anchored near t = 41.5 s, while the blend carries the solution
+        _, outs[name] = run(_imu_stops(noisy, 55.0), engine)
         assert engine.navigator is engine.fallback
-        assert engine.stats.reanchors >= 1  # the held fixes crossed a frame shift
+        assert engine.stats.reanchors == 1
+        assert not alerts(outs[name], AlertCode.FAULT)  # the IMU stopping is no GNSS fault
     lazy, eager = solutions(outs["lazy"]), solutions(outs["eager"])
     assert [s.t_s for s in lazy] == [s.t_s for s in eager]
-    after = [(x, y) for x, y in zip(lazy, eager, strict=True) if x.t_s > 41.0]
+    after = [(x, y) for x, y in zip(lazy, eager, strict=True) if x.t_s > 56.0]
     assert len(after) > 100
     for x, y in after:
         if backlog is None:
@@ -241,4 +241,3 @@ def test_the_fallback_fed_lazily_takes_over_as_if_fed_at_every_fix(backlog):
             assert np.allclose(x.vel_ned_mps, y.vel_ned_mps, atol=0.7**25 * 5.0)
         err = ORIGIN.lla_to_ned(x.lat_rad, x.lon_rad, x.alt_msl_m) - line.pos_ned_m(x.t_s)
         assert np.linalg.norm(err) < 0.3
-    assert not any(isinstance(s, ImuSample) for s in [])  # the import is for the helper
