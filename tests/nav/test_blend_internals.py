@@ -49,3 +49,52 @@ def test_mechanisation_inject_matches_the_per_component_form() -> None:
     assert mech.ba == [-float(dx[9 + i]) for i in range(3)]
     assert mech.bg == [-float(dx[12 + i]) for i in range(3)]
     assert mech.q_nb == ins.rotate_by_psi(q0, dx[6:9])
+
+
+def _random_unit_quat(rng: np.random.Generator) -> ins.Quat:
+    w, x, y, z = rng.normal(size=4)
+    return ins.quat_normalise((float(w), float(x), float(y), float(z)))
+
+
+def test_rotate_by_rotvec_equals_the_composed_quaternion_form() -> None:
+    rng = np.random.default_rng(11)
+    for scale in (1e-10, 1e-4, 0.3):  # both branches of the rotation-vector exponential
+        for _ in range(200):
+            q = _random_unit_quat(rng)
+            rx, ry, rz = (scale * rng.normal(size=3)).tolist()
+            want = ins.quat_normalise(ins.quat_mul(ins.quat_from_rotvec(rx, ry, rz), q))
+            assert ins.rotate_by_rotvec(q, rx, ry, rz) == want
+
+
+def test_carry_attitude_equals_the_composed_quaternion_form() -> None:
+    rng = np.random.default_rng(12)
+    mech = ins.Mechanisation(ins.LocalGravity(0.8, 100.0))
+    for scale in (1e-9, 0.5):
+        for _ in range(200):
+            gyro = (scale * rng.normal(size=3)).tolist()
+            mech.set_raw([0.0, 0.0, -9.8], gyro)
+            mech.bg = (1e-4 * rng.normal(size=3)).tolist()
+            q = _random_unit_quat(rng)
+            dt = float(rng.uniform(-0.04, 0.04))
+            g, bg = mech.last_gyro_b_radps, mech.bg
+            omega_dt = [(g[i] - bg[i]) * dt for i in range(3)]
+            want = ins.quat_normalise(ins.quat_mul(q, ins.quat_from_rotvec(*omega_dt)))
+            assert mech.carry_attitude(q, dt) == want
+
+
+def test_open_segment_covariance_equals_the_array_form() -> None:
+    from companion.nav.blend import _open_segment_cov
+
+    rng = np.random.default_rng(13)
+    for _ in range(100):
+        a = rng.normal(size=(6, 6))
+        b = a @ a.T
+        psd = rng.uniform(1e-6, 1e-1, 3)
+        dt = float(rng.uniform(0.0, 0.1))
+        p_pos = (b[0:3, 3:6] + b[3:6, 0:3]) * dt + b[0:3, 0:3] + dt**2 * b[3:6, 3:6]
+        p_pos += np.diag(psd * dt**3 / 3.0)
+        p_pos = 0.5 * (p_pos + p_pos.T)
+        p_vel = b[3:6, 3:6] + np.diag(psd * dt)
+        got = np.array(_open_segment_cov(b.tolist(), psd.tolist(), dt))
+        np.testing.assert_allclose(got[:9].reshape(3, 3), p_pos, rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(got[9:].reshape(3, 3), p_vel, rtol=1e-14, atol=1e-15)
