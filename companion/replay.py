@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from companion.config import Config
+from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.tlog import TlogReader, TlogWriter
 from companion.pipeline import Pipeline
 
@@ -62,7 +63,8 @@ def replay(
     Raises ``companion.mavlink.tlog.TlogError`` when the input cannot be read.
     """
     pipeline = Pipeline(config)
-    reader = TlogReader(in_path)
+    # the decoder is the only consumer of the messages: light messages where it takes them
+    reader = TlogReader(in_path, light_ids=LIGHT_MESSAGE_IDS)
     wall0 = time.perf_counter()
     first_t: float | None = None
     last_t = 0.0

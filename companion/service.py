@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 from companion.config import Config
+from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.frames import FrameParser
 from companion.mavlink.link import Link, LinkError, open_link
 from companion.notify import SystemdNotifier
@@ -100,7 +101,8 @@ class Service:
         return 0
 
     async def _reader(self, name: str, url: str) -> None:
-        parser = FrameParser(self.config.encoder.dialect)
+        # the pipeline's decoder and the recorder (get_msgbuf) are the only consumers
+        parser = FrameParser(self.config.encoder.dialect, light_ids=LIGHT_MESSAGE_IDS)
         while not self._stop.is_set():
             try:
                 link = await open_link(url, self.config.link.baud)

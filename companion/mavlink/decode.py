@@ -182,6 +182,31 @@ ID_GPS2_RTK = 128
 ID_SCALED_IMU3 = 129
 ID_EXTENDED_SYS_STATE = 245
 
+LIGHT_MESSAGE_IDS = frozenset(
+    {
+        ID_SYSTEM_TIME,
+        ID_GPS_RAW_INT,
+        ID_GPS2_RAW,
+        ID_GPS_RTK,
+        ID_GPS2_RTK,
+        ID_RAW_IMU,
+        ID_SCALED_IMU,
+        ID_SCALED_IMU2,
+        ID_SCALED_IMU3,
+        ID_HIGHRES_IMU,
+        ID_ATTITUDE,
+        ID_ATTITUDE_QUATERNION,
+        ID_EXTENDED_SYS_STATE,
+        ID_VFR_HUD,
+        ID_GLOBAL_POSITION_INT,
+    }
+)
+"""The messages :meth:`Decoder.decode` takes as
+:class:`~companion.mavlink.fastdecode.LightMessage` as well as pymavlink objects (its
+handlers read only fields, ``_header``, ``_type``, ``get_type()`` and ``get_msgId()``).
+What receives them besides the decoder must read no more (the pipeline reads
+``_type``; the service's recorder ``get_msgbuf()``)."""
+
 
 class _Rejected(Exception):
     """Internal: a message failed validation (the argument is the reason)."""

@@ -29,6 +29,7 @@ from __future__ import annotations
 import importlib
 import logging
 import re
+from collections.abc import Collection
 from types import ModuleType
 from typing import Any
 
@@ -95,6 +96,7 @@ def try_frame(
     buf: bytearray,
     pos: int,
     fast: FastDecoder | None = None,
+    light: bool = False,
 ) -> tuple[int, Any, int]:
     """Try to decode one frame whose STX byte is at ``buf[pos]``.
 
@@ -112,6 +114,9 @@ def try_frame(
         Optional :class:`~companion.mavlink.fastdecode.FastDecoder` of the same
         dialect: it decodes the common frames to the very objects pymavlink would
         build, faster; whatever it declines goes to ``mav.decode``.
+    light
+        With ``fast``: light messages for the fast decoder's ``light_ids``
+        (:meth:`~companion.mavlink.fastdecode.FastDecoder.light_decode_at`).
 
     Returns
     -------
@@ -121,7 +126,7 @@ def try_frame(
         not a frame this dialect can verify.
     """
     if fast is not None:
-        found = fast.decode_at(buf, pos)
+        found = fast.light_decode_at(buf, pos) if light else fast.decode_at(buf, pos)
         if found is not None:
             return FRAME_OK, found[0], found[1]
     length = frame_length(buf, pos)
@@ -149,6 +154,10 @@ class FrameParser:
     ----------
     dialect
         pymavlink v2.0 dialect module name (``ardupilotmega`` by default).
+    light_ids
+        Message ids returned as :class:`~companion.mavlink.fastdecode.LightMessage`
+        rather than pymavlink objects, for consumers known to read only what it has
+        (see :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`). Default: none.
 
     Attributes
     ----------
@@ -165,17 +174,19 @@ class FrameParser:
         "_mav",
         "_map",
         "_fast",
+        "_light",
         "_in_bad",
         "bad_frames",
         "bad_bytes",
         "good_frames",
     )
 
-    def __init__(self, dialect: str = "ardupilotmega") -> None:
+    def __init__(self, dialect: str = "ardupilotmega", light_ids: Collection[int] = ()) -> None:
         mod = load_dialect(dialect)
         self._mav = mod.MAVLink(None)
         self._map: dict[int, Any] = mod.mavlink_map
-        self._fast = FastDecoder(mod)
+        self._fast = FastDecoder(mod, light_ids)
+        self._light = bool(light_ids)
         self._buf = bytearray()
         self._in_bad = False
         self.bad_frames = 0
@@ -225,7 +236,7 @@ class FrameParser:
                 self._mark_bad(nxt - pos)
                 pos = nxt
                 continue
-            status, msg, length = try_frame(self._mav, self._map, buf, pos, self._fast)
+            status, msg, length = try_frame(self._mav, self._map, buf, pos, self._fast, self._light)
             if status == FRAME_OK:
                 out.append(msg)
                 self._in_bad = False

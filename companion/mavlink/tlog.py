@@ -32,7 +32,7 @@ from __future__ import annotations
 import collections
 import logging
 import struct
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
@@ -78,6 +78,12 @@ class TlogReader:
     resync_records
         Consecutive mutually consistent skipped records after which the reader
         accepts that the recording clock stepped.
+    light_ids
+        Message ids yielded as :class:`~companion.mavlink.fastdecode.LightMessage`
+        (fields, header and pymavlink's few accessors, built at a third of the cost)
+        rather than pymavlink objects: for consumers known to read only those, such as
+        :class:`companion.mavlink.decode.Decoder` with
+        :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`. Default: none.
 
     Raises
     ------
@@ -91,8 +97,10 @@ class TlogReader:
         dialect: str = "ardupilotmega",
         max_gap_s: float = 3600.0,
         resync_records: int = 5,
+        light_ids: Collection[int] = (),
     ) -> None:
         self.path = Path(path)
+        self._light_ids = frozenset(light_ids)
         try:
             mod = load_dialect(dialect)
         except ValueError as exc:
@@ -131,7 +139,8 @@ class TlogReader:
             return
         mav = self._mod.MAVLink(None)
         mmap_ = self._mod.mavlink_map
-        message_at = FastDecoder(self._mod).message_at
+        fast = FastDecoder(self._mod, self._light_ids)
+        message_at = fast.light_at if self._light_ids else fast.message_at
         timestamp_at = _TS.unpack_from
         stats = self.stats
         buf = bytearray()
