@@ -317,31 +317,13 @@ class Mechanisation:
         return dt, fn
 
     def carry_attitude(self, q_nb: Quat, dt_s: float) -> Quat:
-        """``q_nb`` advanced by the last bias-corrected gyro reading over ``dt_s`` (may be < 0).
-
-        ``quat_normalise(quat_mul(q_nb, quat_from_rotvec(omega dt)))`` written out in one
-        body (the same operations; per attitude sample, so the calls are worth saving).
-        """
+        """``q_nb`` advanced by the last bias-corrected gyro reading over ``dt_s`` (may be < 0)."""
         g = self.last_gyro_b_radps
         bg = self.bg
-        rx = (g[0] - bg[0]) * dt_s
-        ry = (g[1] - bg[1]) * dt_s
-        rz = (g[2] - bg[2]) * dt_s
-        ang = math.sqrt(rx * rx + ry * ry + rz * rz)
-        if ang < 1e-8:
-            bw, bx, by, bz = 1.0 - ang * ang / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
-        else:
-            s = math.sin(0.5 * ang) / ang
-            bw, bx, by, bz = math.cos(0.5 * ang), rx * s, ry * s, rz * s
-        aw, ax, ay, az = q_nb
-        w = aw * bw - ax * bx - ay * by - az * bz
-        x = aw * bx + ax * bw + ay * bz - az * by
-        y = aw * by - ax * bz + ay * bw + az * bx
-        z = aw * bz + ax * by - ay * bx + az * bw
-        n = math.sqrt(w * w + x * x + y * y + z * z)
-        if w < 0.0:
-            n = -n
-        return (w / n, x / n, y / n, z / n)
+        omega_dt = quat_from_rotvec(
+            (g[0] - bg[0]) * dt_s, (g[1] - bg[1]) * dt_s, (g[2] - bg[2]) * dt_s
+        )
+        return quat_normalise(quat_mul(q_nb, omega_dt))
 
     def inject(self, dx: FloatArray) -> None:
         """Apply an error-state correction (estimate minus truth convention), shape (15,)."""
