@@ -156,3 +156,43 @@ def test_no_inertial_reference_on_the_ground_before_the_heading_is_trusted(tmp_p
     assert summary.alerts.get("FAULT", 0) == 0, summary.alerts
     assert summary.alerts.get("GNSS_LOST", 0) == 0, summary.alerts
     assert summary.alerts.get("HDG_READY", 0) == 1
+
+
+def test_a_receiver_excluded_on_old_references_alone_comes_back(tmp_path):
+    """The bundled MEMS cruise replayed with the tactical configuration (a wrong IMU grade
+    in the [coast] block): the references' covariance is far too small, they blame the
+    only receiver and, no longer re-anchored while it is excluded, used to keep it out
+    for the rest of the flight while the free inertial solution drifted kilometres
+    (normal-flight H RMS 7.2 km). References older than ``reference_max_age_s`` are not
+    tested against, so every exclusion ends: GNSS_BACK follows each within the age limit,
+    the slots' life, the recovery time and a few reacquisition fixes (plus the fixture's
+    own GNSS outage where it falls inside)."""
+    from pathlib import Path
+
+    from companion.config import load_config
+    from companion.evaluate import evaluate
+    from companion.replay import replay
+
+    root = Path(__file__).resolve().parent.parent / "sitl_fixtures"
+    config = load_config(root / "tactical.toml")
+    out = tmp_path / "out.tlog"
+    replay(root / "cruise_gnss_loss.tlog", out, config)
+    ev = evaluate(out, root / "cruise_gnss_loss.truth.csv")
+    exclusions = [a.t_s for a in ev.alerts if a.code == "FAULT" and "excluded" in a.text]
+    backs = [a.t_s for a in ev.alerts if a.code == "GNSS_BACK"]
+    (gap,) = [e for e in ev.events if e.kind == "outage"]
+    assert exclusions, "the mis-configured references no longer blame the receiver"
+    bound_s = (
+        config.integrity.reference_max_age_s
+        + config.coast.life_s
+        + config.integrity.recovery_s
+        + 5.0
+    )
+    for t_x in exclusions:
+        end = t_x + bound_s
+        if end > gap.t_start_s and t_x < gap.t_end_s:
+            end += gap.t_end_s - gap.t_start_s
+        if end > ev.t_last_s:
+            continue
+        assert any(t_x < t <= end for t in backs), (t_x, backs)
+    assert ev.normal.h_rms_m < 1000.0  # 7.2 km when the receiver stayed out

@@ -144,6 +144,15 @@ class IntegrityConfig:
     others' by the F(dof, dof) quantile at this probability (659 for 3 dof)."""
     default_vel_var_m2ps2: float = 0.25
     """Velocity variance for extrapolating a paired fix whose velocity accuracy is unknown."""
+    reference_max_age_s: float = 60.0
+    """An inertial reference coasting longer than this since its anchor is not tested
+    against: its covariance is only as right as the configured IMU grade, and an error
+    there (a MEMS unit configured as tactical) grows with the coasting time until the
+    reference blames a healthy receiver and, the references no longer re-anchoring while
+    it is excluded, keeps it excluded for good. In normal flight slots are re-anchored
+    every ``CoastConfig.life_s`` (30 s); older ones exist only after a fault, where this
+    bounds how long a receiver stays excluded on the references' word alone (with a
+    second receiver the pair test still holds a faulty one out)."""
     phase: PhaseConfig = field(default_factory=PhaseConfig)
     """Flight-phase rules."""
 
@@ -165,6 +174,7 @@ class IntegrityConfig:
             "recovery_s",
             "report_rate_hz",
             "default_vel_var_m2ps2",
+            "reference_max_age_s",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -604,6 +614,9 @@ class IntegrityMonitor:
             key = (tag, _REF + name)
             drift: ReferenceDrift | None = None
             if isinstance(ref, CoastState):
+                if t - ref.anchor_t_s > cfg.reference_max_age_s:
+                    self.stats["reference_coasted_too_long"] += 1
+                    continue
                 drift = self._coast_drift(key, ref, meas)
                 if drift is None:
                     continue
