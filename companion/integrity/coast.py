@@ -91,6 +91,12 @@ class CoastState(NavState):
     vrw_psd_m2ps3: float = 0.0
 
 
+_RESTAGGER = 0.95
+"""An overdue slot waits until this fraction of the stagger has passed since the last
+anchor (a fraction: in steady flight consecutive slots come due a stagger apart, give or
+take the publication tick that anchors them)."""
+
+
 @dataclass(frozen=True, slots=True)
 class CoastConfig:
     """Settings of :class:`InertialCoast` (validated). Defaults: the tactical grade.
@@ -229,6 +235,7 @@ class InertialCoast:
         self._vd_run = 0.0
         self._slots: list[_Slot | None] = [None] * self.config.slots
         self._first_anchor_t: float | None = None
+        self._last_anchor_t = -math.inf
         self._restack()
 
     def _drop_slots(self, reason: str) -> None:
@@ -237,6 +244,7 @@ class InertialCoast:
             log.warning("inertial coast: every slot dropped (%s)", reason)
         self._slots = [None] * self.config.slots
         self._first_anchor_t = None
+        self._last_anchor_t = -math.inf
         self._restack()
 
     # ------------------------------------------------------------------ inputs
@@ -392,6 +400,11 @@ class InertialCoast:
             age = t_s - slot.t_s
             if age >= cfg.life_s and age > best_age:
                 best, best_age = i, age
+        if best is not None and t_s - self._last_anchor_t < _RESTAGGER * stagger:
+            # slots overdue together (anchoring was suspended through an outage or a
+            # fault) are re-anchored a stagger apart, not all at the next few ticks:
+            # otherwise they would age, expire and re-anchor together from then on
+            return None
         return best
 
     def anchor_due(self, t_s: float) -> bool:
@@ -476,6 +489,7 @@ class InertialCoast:
         )
         if self._first_anchor_t is None:
             self._first_anchor_t = t
+        self._last_anchor_t = t
         self._restack()
         # the running down position for the gravity gradient follows the newest anchor
         h = (self._last_t or t) - t

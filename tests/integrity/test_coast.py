@@ -183,6 +183,28 @@ def test_slots_are_staggered_and_reanchored_after_their_life() -> None:
     assert coast.stats["anchor_not_due"] == 1
 
 
+def test_slots_overdue_together_are_restaggered() -> None:
+    """Anchoring suspended for a minute (an outage, a fault): when it resumes, with the
+    engine asking at every 0.1 s publication tick, the overdue slots are re-anchored a
+    stagger apart (so they keep expiring one at a time), not all at the next ticks."""
+    cfg = CoastConfig(slots=3, life_s=30.0)
+    coast = InertialCoast(cfg, G)
+    coast.on_attitude(att(0.0))
+    anchors: list[float] = []
+    for k in range(0, 15001):  # 150 s at 100 Hz
+        t = k / 100.0
+        coast.on_imu(imu(t, -G))
+        suspended = 35.0 <= t < 95.0
+        if k % 10 == 0 and not suspended and coast.anchor_due(t):
+            coast.anchor(state(t, np.zeros(3), np.zeros(3)))
+            anchors.append(t)
+    resumed = [t for t in anchors if t >= 95.0]
+    assert resumed[:3] == pytest.approx([95.0, 104.5, 114.0], abs=0.11)
+    assert min(np.diff(resumed)) >= 0.95 * cfg.life_s / cfg.slots - 1e-9
+    ages = sorted(a for a in coast.slot_ages_s(149.0) if a is not None)
+    assert ages[1] - ages[0] > 9.0 and ages[2] - ages[1] > 9.0
+
+
 def test_imu_gap_and_bad_inputs() -> None:
     coast = InertialCoast(CoastConfig(slots=1), G)
     coast.on_imu(imu(0.0, -G))
