@@ -349,17 +349,29 @@ class FastDecoder:
             return None
         return msg, HEADER_LEN_V2 + buf[pos + 1] + CRC_LEN
 
-    def message_at(self, buf: bytearray, pos: int) -> Any | None:
-        """The message of :meth:`decode_at` alone (its frame is ``12 + buf[pos + 1]``
-        bytes long, an unsigned MAVLink 2 frame), or None."""
+    def _frame_at(self, buf: bytearray, pos: int) -> tuple[int, int, int] | None:
+        """``(payload length, frame length, message id)`` of the unsigned MAVLink 2 frame
+        whose STX is at ``buf[pos]``, or None (short, not MAVLink 2, signed or unknown
+        flags, or no CRC check)."""
         avail = len(buf) - pos
         if avail < HEADER_LEN_V2 or buf[pos] != STX_V2 or buf[pos + 2] != 0 or not self.enabled:
-            return None  # short, not MAVLink 2, signed or unknown flags, or no CRC check
+            return None
         mlen = buf[pos + 1]
         n = HEADER_LEN_V2 + mlen + CRC_LEN
         if n > avail:
             return None
-        msg_id = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+        return mlen, n, buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+
+    def message_at(self, buf: bytearray, pos: int) -> Any | None:
+        """The message of :meth:`decode_at` alone (its frame is ``12 + buf[pos + 1]``
+        bytes long, an unsigned MAVLink 2 frame), or None."""
+        found = self._frame_at(buf, pos)
+        if found is None:
+            return None
+        return self._pymavlink_at(buf, pos, *found)
+
+    def _pymavlink_at(self, buf: bytearray, pos: int, mlen: int, n: int, msg_id: int) -> Any:
+        """pymavlink's object of the frame :meth:`_frame_at` found, or None."""
         try:
             plan = self._plans[msg_id]
         except KeyError:
@@ -413,20 +425,16 @@ class FastDecoder:
     def light_at(self, buf: bytearray, pos: int) -> Any | None:
         """:meth:`message_at` with a :class:`LightMessage` for the ids of ``light_ids``
         (the same checks, the same field values)."""
-        avail = len(buf) - pos
-        if avail < HEADER_LEN_V2 or buf[pos] != STX_V2 or buf[pos + 2] != 0 or not self.enabled:
-            return None  # as message_at
-        mlen = buf[pos + 1]
-        n = HEADER_LEN_V2 + mlen + CRC_LEN
-        if n > avail:
+        found = self._frame_at(buf, pos)
+        if found is None:
             return None
-        msg_id = buf[pos + 7] | (buf[pos + 8] << 8) | (buf[pos + 9] << 16)
+        mlen, n, msg_id = found
         try:
             light = self._lights[msg_id]
         except KeyError:
             light = self._light_plan(msg_id)
         if light is None:
-            return self.message_at(buf, pos)
+            return self._pymavlink_at(buf, pos, mlen, n, msg_id)
         crc_fn: Callable[[bytes | bytearray, int], int] = self._crc  # type: ignore[assignment]
         frame = buf[pos : pos + n]
         crc = frame[n - 2] | (frame[n - 1] << 8)
