@@ -3,7 +3,7 @@
 For each IMU grade (tactical, MEMS), flight (3 deg approach, cruise with
 coordinated turns), outage length (10, 20, 40, 60 s) and seed, one flight is
 simulated with :mod:`companion.sim`; every navigator is driven with the same
-typed samples (fixes converted by :func:`companion.engine.gnss_measurement`),
+typed samples (fixes converted by :func:`companion.nav.gnss.gnss_measurement`),
 the fixes inside the outage window are withheld, and the error of
 ``predict(t)`` against the truth is taken at 10 Hz through the gap.
 
@@ -41,10 +41,10 @@ from pymavlink.dialects.v20 import ardupilotmega
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.engine import gnss_measurement
 from companion.integrity.limits import CATEGORY_ACCURACY, ApproachCategory
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
+from companion.nav.gnss import gnss_measurement
 from companion.nav.motion import SingerNavigator
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator, NavState
 from companion.nav.passthrough import PassthroughNavigator

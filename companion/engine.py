@@ -38,6 +38,7 @@ from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, wrap_2pi
+from companion.nav.gnss import gnss_measurement
 from companion.nav.heading import HeadingConfig, HeadingCorrector
 from companion.nav.motion import SingerConfig, SingerNavigator
 from companion.nav.navigator import (
@@ -74,23 +75,6 @@ from companion.types import (
 )
 
 log = logging.getLogger(__name__)
-
-# 1-sigma position error by fix type when the receiver reports no accuracy (m, horizontal):
-# RTK fixed ~2 cm, float ~0.3 m, DGPS ~1 m, 3-D ~2.5 m (S1 table and typical receivers).
-FALLBACK_H_SIGMA_M = {
-    FixType.RTK_FIXED: 0.02,
-    FixType.RTK_FLOAT: 0.3,
-    FixType.DGPS: 1.0,
-    FixType.FIX_3D: 2.5,
-    FixType.FIX_2D: 5.0,
-}
-"""S1 reports RTK fixed 1.6-2.2 cm 2-D, float 26-32 cm, no corrections > 3.5-4 m (95 %)."""
-VERTICAL_OVER_HORIZONTAL = 1.5
-"""Vertical 1-sigma as a multiple of horizontal when v_acc is not reported (S1's ratios)."""
-UERE_M = 2.5
-"""User-equivalent range error turning HDOP/VDOP into a 1-sigma position error."""
-DEFAULT_VEL_SIGMA_MPS = 0.3
-"""Velocity 1-sigma when vel_acc is not reported."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,41 +136,6 @@ class EngineConfig:
 
 
 NAVIGATORS = ("blend", "singer", "passthrough")
-
-
-def gnss_measurement(fix: GnssFix, frame: LocalFrame) -> GnssMeasurement:
-    """A fix as a measurement in ``frame``, with per-axis variances from its accuracies.
-
-    Falls back to DOP x UERE, then to a per-fix-type table, when the receiver
-    does not report h_acc / v_acc / vel_acc.
-    """
-    pos_ned_m = frame.lla_to_ned(fix.lat_rad, fix.lon_rad, fix.alt_msl_m)
-    h_sigma = fix.h_acc_m
-    if h_sigma is None:
-        h_sigma = (
-            fix.hdop * UERE_M
-            if fix.hdop is not None
-            else FALLBACK_H_SIGMA_M.get(fix.fix_type, 10.0)
-        )
-    v_sigma = fix.v_acc_m
-    if v_sigma is None:
-        v_sigma = fix.vdop * UERE_M if fix.vdop is not None else VERTICAL_OVER_HORIZONTAL * h_sigma
-    vel_sigma = fix.vel_acc_mps if fix.vel_acc_mps is not None else DEFAULT_VEL_SIGMA_MPS
-    if fix.vel_ne_mps is not None:
-        vel = np.array([fix.vel_ne_mps[0], fix.vel_ne_mps[1], np.nan])
-        vel_var = np.array([vel_sigma**2, vel_sigma**2, np.nan])
-    else:
-        vel = np.full(3, np.nan)
-        vel_var = np.full(3, np.nan)
-    return GnssMeasurement(
-        t_s=fix.t_s,
-        pos_ned_m=pos_ned_m,
-        pos_var_ned_m2=np.array([h_sigma**2, h_sigma**2, v_sigma**2]),
-        vel_ned_mps=vel,
-        vel_var_ned_m2ps2=vel_var,
-        fix_type=fix.fix_type,
-        receiver_id=fix.receiver_id,
-    )
 
 
 @dataclass(slots=True)

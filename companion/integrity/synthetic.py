@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from companion.engine import gnss_measurement
 from companion.integrity.coast import CoastConfig, CoastState, InertialCoast
 from companion.integrity.monitor import IntegrityMonitor
 from companion.nav import earth
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
+from companion.nav.gnss import gnss_measurement
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator, NavState
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast

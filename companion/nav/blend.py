@@ -103,6 +103,7 @@ import numpy.typing as npt
 
 from companion.nav import ins
 from companion.nav.frames import LocalFrame, quat_to_euler, skew, wrap_pi
+from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
 from companion.nav.kalman import (
     Correction,
     InnovationWindow,
@@ -123,19 +124,6 @@ Mat3Values = tuple[float, float, float, float, float, float, float, float, float
 
 _DEG = math.pi / 180.0
 _HOUR_S = 3600.0
-
-FALLBACK_STD_M: dict[FixType, tuple[float, float]] = {
-    FixType.RTK_FIXED: (0.02, 0.03),
-    FixType.RTK_FLOAT: (0.30, 0.54),
-    FixType.DGPS: (1.0, 2.0),
-    FixType.FIX_3D: (4.0, 6.0),
-    FixType.FIX_2D: (6.0, 30.0),
-    FixType.STATIC: (0.02, 0.03),
-    FixType.PPP: (0.3, 0.5),
-}
-"""Horizontal and vertical 1-sigma position accuracy (m) assumed per fix type when the
-receiver reported none (S1: fixed 1.6-2.2 cm 2-D / 2.8-3.4 cm height, float 26-32 / 53-54 cm,
-without corrections > 3.5-4 m)."""
 
 GNSS_ERR_TAU_S: dict[FixType, float] = {
     FixType.RTK_FIXED: 30.0,
@@ -360,7 +348,8 @@ class BlendNavigator:
         self._pos_fallback = {
             fix: (h_std**2, h_std**2, v_std**2) for fix, (h_std, v_std) in FALLBACK_STD_M.items()
         }
-        self._pos_fallback_other = (10.0**2, 10.0**2, 15.0**2)
+        h_un, v_un = UNKNOWN_STD_M
+        self._pos_fallback_other = (h_un**2, h_un**2, v_un**2)
         self._vel_fallback_floor = (cfg.vel_std_fallback_mps**2, cfg.vel_std_floor_mps**2)
         self._h_cache: dict[tuple[bool, ...], tuple[tuple[int, ...], FloatArray]] = {}
         self._gm = cfg.gnss_error_model == "gauss_markov"

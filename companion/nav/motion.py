@@ -35,8 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.nav.blend import FALLBACK_STD_M
 from companion.nav.frames import LocalFrame
+from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
 from companion.nav.kalman import chi2_gate, joseph_update, predict_covariance, van_loan
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
 from companion.types import AttitudeSample, FloatArray, ImuSample
@@ -213,7 +213,7 @@ class SingerNavigator:
 
     def _variances(self, meas: GnssMeasurement) -> tuple[FloatArray, FloatArray]:
         cfg = self.config
-        h_std, v_std = FALLBACK_STD_M.get(meas.fix_type, (10.0, 15.0))
+        h_std, v_std = FALLBACK_STD_M.get(meas.fix_type, UNKNOWN_STD_M)
         fallback = np.array([h_std**2, h_std**2, v_std**2])
         r_pos = np.asarray(meas.pos_var_ned_m2, dtype=float)
         r_pos = np.where(np.isfinite(r_pos) & (r_pos > 0.0), r_pos, fallback)

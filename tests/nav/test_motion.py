@@ -153,7 +153,7 @@ def test_gate_and_bad_input() -> None:
     )
     st2 = nav2.predict(0.0)
     assert st2 is not None
-    np.testing.assert_allclose(np.diag(st2.pos_cov_ned_m2), [0.09, 0.09, 0.54**2])
+    np.testing.assert_allclose(np.diag(st2.pos_cov_ned_m2), [0.09, 0.09, 0.45**2])
 
 
 def test_config_validation() -> None:

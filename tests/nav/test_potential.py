@@ -680,7 +680,7 @@ def test_field_strength_does_not_depend_on_the_fixes_accuracy_class() -> None:
 def _sim_one_step(scenario: str, seed: int) -> dict[str, np.ndarray | int | float]:
     """The engine's use on a simulated flight: receiver 0's fixes as measurements, the
     prediction at each new fix's time compared with it, then the fix added."""
-    from companion.engine import gnss_measurement
+    from companion.nav.gnss import gnss_measurement
     from companion.sim import make_scenario, simulate
     from companion.types import GnssFix
 
