@@ -59,6 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.nav import earth
+from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
 from companion.nav.navigator import NavState
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
@@ -102,7 +103,7 @@ class CoastConfig:
     """Settings of :class:`InertialCoast` (validated). Defaults: the tactical grade.
 
     The IMU-grade figures are the simulator's grade profiles
-    (:data:`companion.sim.sensors.IMU_GRADES`, ``ATTITUDE_ERROR_BY_GRADE``), which are
+    (:data:`companion.nav.grades.IMU_GRADES`, ``ATTITUDE_ERROR_BY_GRADE``), which are
     also the blend's (:meth:`companion.nav.blend.BlendConfig.for_grade`); use
     :meth:`for_grade` rather than typing them.
     """
@@ -158,8 +159,6 @@ class CoastConfig:
         Bias: turn-on and instability 1-sigma combined; white noise: the noise
         density; attitude: the autopilot's attitude error for that grade.
         """
-        from companion.sim.sensors import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
-
         if grade not in IMU_GRADES or grade not in ATTITUDE_ERROR_BY_GRADE:
             raise ValueError(f"unknown IMU grade {grade!r}")
         g = IMU_GRADES[grade]

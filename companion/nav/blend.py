@@ -104,6 +104,7 @@ import numpy.typing as npt
 from companion.nav import ins
 from companion.nav.frames import LocalFrame, quat_to_euler, skew, wrap_pi
 from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
+from companion.nav.grades import IMU_GRADES
 from companion.nav.kalman import (
     Correction,
     InnovationWindow,
@@ -268,25 +269,15 @@ class BlendConfig:
 
         ``overrides`` replace any other field.
         """
-        grades: dict[str, dict[str, object]] = {
-            # S1: tactical gyro drift 1-10 deg/h, accelerometer bias 0.1-1 mG
-            "tactical": dict(
-                accel_vrw_mps_rts=0.03 / 60.0,
-                gyro_arw_rad_rts=0.05 * _DEG / 60.0,
-                accel_bias_sigma_mps2=0.3e-3 * 9.80665,
-                gyro_bias_sigma_radps=3.0 * _DEG / _HOUR_S,
-            ),
-            # a typical autopilot MEMS IMU after factory calibration
-            "mems": dict(
-                accel_vrw_mps_rts=150e-6 * 9.80665,
-                gyro_arw_rad_rts=0.005 * _DEG,
-                accel_bias_sigma_mps2=10e-3 * 9.80665,
-                gyro_bias_sigma_radps=0.1 * _DEG,
-            ),
-        }
-        if grade not in grades:
-            raise ValueError(f"grade must be one of {sorted(grades)}, got {grade!r}")
-        params: dict[str, object] = dict(grades[grade])
+        if grade not in IMU_GRADES or grade == "perfect":
+            raise ValueError(f"grade must be one of ['mems', 'tactical'], got {grade!r}")
+        g = IMU_GRADES[grade]
+        params: dict[str, object] = dict(
+            accel_vrw_mps_rts=g.acc_noise_density_mps2_rthz,
+            gyro_arw_rad_rts=g.gyro_noise_density_radps_rthz,
+            accel_bias_sigma_mps2=g.acc_bias_sigma_mps2,
+            gyro_bias_sigma_radps=g.gyro_bias_sigma_radps,
+        )
         params.update(overrides)
         return cls(**params)  # type: ignore[arg-type]
 

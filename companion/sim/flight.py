@@ -17,15 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.nav.frames import LocalFrame
+from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
 from companion.sim import autopilot as ap
 from companion.sim.scenarios import Event, Scenario, build_script
 from companion.sim.sensors import (
-    ATTITUDE_ERROR_BY_GRADE,
     ATTITUDE_RATE_NOISE_RADPS,
     AUTOPILOT_POS_SIGMA_M,
     AUTOPILOT_POS_TAU_S,
     GNSS_MODE_SPECS,
-    IMU_GRADES,
     ImuErrors,
     gauss_markov,
     gauss_markov_fast,

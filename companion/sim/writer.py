@@ -25,9 +25,10 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from companion.mavlink import units
+from companion.nav.grades import IMU_GRADES
 from companion.sim.flight import SimFlight, _lla
 from companion.sim.scenarios import describe
-from companion.sim.sensors import GNSS_MODE_SPECS, IMU_GRADES, gnss_state
+from companion.sim.sensors import GNSS_MODE_SPECS, gnss_state
 
 logger = logging.getLogger(__name__)
 

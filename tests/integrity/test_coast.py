@@ -57,7 +57,7 @@ def test_config_validation(kwargs: dict[str, object]) -> None:
 
 
 def test_grade_figures_are_the_simulators() -> None:
-    from companion.sim.sensors import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
+    from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
 
     for grade in ("tactical", "mems"):
         cfg = CoastConfig.for_grade(grade)

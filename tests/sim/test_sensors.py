@@ -7,10 +7,10 @@ import math
 import numpy as np
 from scipy import stats
 
+from companion.nav.grades import IMU_GRADES
 from companion.sim import make_scenario, simulate
 from companion.sim.sensors import (
     GNSS_MODE_SPECS,
-    IMU_GRADES,
     gauss_markov,
     gauss_markov_fast,
     gnss_state,
