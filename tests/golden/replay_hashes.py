@@ -99,7 +99,8 @@ def replay_hash(tlog: Path, cfg: str) -> str:
 
             evaluation = evaluate(out, truth)
             for text in (evaluation.to_text(), json.dumps(evaluation.to_dict(), sort_keys=True)):
-                parts.append(text.replace(str(out), "OUT").encode())
+                text = text.replace(str(out), "OUT").replace(str(FIXTURES), "FIXTURES")
+                parts.append(text.encode())
         return _sha(b"\0".join(parts))
 
 
