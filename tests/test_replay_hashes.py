@@ -26,6 +26,6 @@ def test_real_flights_replay_byte_identical():
     assert changed == []
 
 
-def test_template_and_simulated_flights_unchanged():
+def test_simulated_flights_unchanged():
     found = golden.other_hashes()
     assert found == {name: RECORDED[name] for name in found}
