@@ -1,7 +1,7 @@
 """Configuration: one frozen dataclass per block, loaded from TOML.
 
 Each block's dataclass lives beside the code it configures (``EngineConfig`` in
-``engine.py``, ``OutageConfig`` in ``nav/outage.py`` ...) with its defaults and
+``engine/config.py``, ``OutageConfig`` in ``nav/outage.py`` ...) with its defaults and
 its validation (``__post_init__`` raising ``ValueError``); this module composes
 them into :class:`Config` and loads TOML. An unknown block or key, a value of
 the wrong type or a value the block rejects is a :class:`ConfigError` whose
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from companion.engine import EngineConfig
+from companion.engine.config import EngineConfig
 from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig

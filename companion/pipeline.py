@@ -129,7 +129,7 @@ class Pipeline:
 
     def heartbeat(self) -> bytes:
         """Our HEARTBEAT, with system_status from the navigation's health."""
-        mode = self.engine.monitor.mode
+        mode = self.engine.outage.mode
         if mode is NavMode.LOST:
             status = MAV_STATE_CRITICAL
         elif mode is NavMode.INIT:

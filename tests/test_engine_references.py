@@ -54,8 +54,8 @@ def test_without_imu_the_potential_filter_bridges_a_gap():
     outs = run(no_imu(stream), engine)
     gap = bridged(outs)
     assert len(gap) >= 35
-    assert engine.navigator is engine.fallback and engine.frame is not None
-    pot = engine.potential
+    assert engine.navigators.navigator is engine.navigators.fallback and engine.frame is not None
+    pot = engine.bridge.potential
     assert pot is not None and pot.fit_count >= 1
     for sol in gap[::7]:  # what was published is the potential prediction
         pred = pot.predict(sol.t_s)
