@@ -1,11 +1,13 @@
 """Configuration: one frozen dataclass per block, loaded from TOML.
 
 Each block's dataclass lives beside the code it configures (``EngineConfig`` in
-``engine.py``, ``OutageConfig`` in ``nav/outage.py`` ...) with its defaults and
-its validation (``__post_init__`` raising ``ValueError``); this module composes
-them into :class:`Config` and loads TOML. An unknown block or key, a value of
-the wrong type or a value the block rejects is a :class:`ConfigError` whose
-one-line message names ``[block] key``.
+``engine/config.py``, ``OutageConfig`` in ``nav/outage.py`` ...) with its
+defaults, each field's range declared beside it (:mod:`companion.ranges`) and
+the checks that relate fields in ``__post_init__`` (raising ``ValueError``).
+This module holds the service's own blocks (``[link]``, ``[streams]``),
+composes them all into :class:`Config` and loads TOML. An unknown block or key,
+a value of the wrong type or a value the block rejects is a :class:`ConfigError`
+whose one-line message names ``[block] key``.
 
 ``companion config-template`` prints every block with its keys, defaults and
 documentation: the example ``systemd/companion.toml`` is that output.
@@ -23,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from companion.engine import EngineConfig
+from companion.engine.config import EngineConfig
 from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig
@@ -32,6 +34,7 @@ from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
 from companion.nav.potential import PotentialConfig
+from companion.ranges import check_ranges, ranged
 
 
 class ConfigError(ValueError):
@@ -47,11 +50,11 @@ class LinkConfig:
     tcp:HOST:PORT (client) or tcpin:HOST:PORT (server)."""
     gcs: str = ""
     """Optional ground-station link (same URL forms); empty for none."""
-    baud: int = 921600
+    baud: int = ranged(921600, gt=0)
     """Serial baud rate when the URL does not give one."""
-    heartbeat_rate_hz: float = 1.0
+    heartbeat_rate_hz: float = ranged(1.0, ge=0.1, le=10.0)
     """Our HEARTBEAT rate."""
-    reconnect_s: float = 1.0
+    reconnect_s: float = ranged(1.0, gt=0.0)
     """Wait before re-opening a link that dropped."""
     state_file: str = "/var/lib/companion/state.json"
     """Where the heading correction of the current flight is kept across a restart."""
@@ -59,37 +62,29 @@ class LinkConfig:
     """Flight recorder folder (every message in and out, as .tlog); empty to disable."""
 
     def __post_init__(self) -> None:
+        check_ranges(self)
         if not self.master:
             raise ValueError("master must name a link")
-        if self.baud <= 0:
-            raise ValueError("baud must be > 0")
-        if not 0.1 <= self.heartbeat_rate_hz <= 10.0:
-            raise ValueError("heartbeat_rate_hz must be in [0.1, 10]")
-        if self.reconnect_s <= 0.0:
-            raise ValueError("reconnect_s must be > 0")
 
 
 @dataclass(frozen=True, slots=True)
 class StreamsConfig:
     """Message rates the service asks the autopilot for (Hz); 0 leaves a stream alone."""
 
-    gps_raw_int_hz: float = 10.0
-    gps2_raw_hz: float = 10.0
-    gps_rtk_hz: float = 1.0
-    raw_imu_hz: float = 50.0
-    scaled_imu2_hz: float = 50.0
-    highres_imu_hz: float = 50.0
-    attitude_hz: float = 25.0
-    attitude_quaternion_hz: float = 25.0
-    extended_sys_state_hz: float = 2.0
-    vfr_hud_hz: float = 2.0
-    global_position_int_hz: float = 5.0
+    gps_raw_int_hz: float = ranged(10.0, ge=0.0, le=1000.0)
+    gps2_raw_hz: float = ranged(10.0, ge=0.0, le=1000.0)
+    gps_rtk_hz: float = ranged(1.0, ge=0.0, le=1000.0)
+    raw_imu_hz: float = ranged(50.0, ge=0.0, le=1000.0)
+    scaled_imu2_hz: float = ranged(50.0, ge=0.0, le=1000.0)
+    highres_imu_hz: float = ranged(50.0, ge=0.0, le=1000.0)
+    attitude_hz: float = ranged(25.0, ge=0.0, le=1000.0)
+    attitude_quaternion_hz: float = ranged(25.0, ge=0.0, le=1000.0)
+    extended_sys_state_hz: float = ranged(2.0, ge=0.0, le=1000.0)
+    vfr_hud_hz: float = ranged(2.0, ge=0.0, le=1000.0)
+    global_position_int_hz: float = ranged(5.0, ge=0.0, le=1000.0)
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if not 0.0 <= value <= 1000.0:
-                raise ValueError(f"{f.name} must be in [0, 1000]")
+        check_ranges(self)
 
     def rates_hz(self) -> dict[str, float]:
         """Requested rates keyed by MAVLink message name (only those > 0)."""

@@ -9,12 +9,16 @@ wall time live, log time in a replay).
 It owns the decoder (MAVLink -> typed samples), the pure engine, the encoder
 (outputs -> MAVLink), the stream requests made when the autopilot first
 appears and after it reboots, the check of the rates actually received, and
-the heartbeat's content.
+the periodic output (our HEARTBEAT at ``link.heartbeat_rate_hz``, its
+``system_status`` from the navigation's health) with its clock: a driver asks
+:meth:`Pipeline.next_due_s` when to call :meth:`Pipeline.on_timer` next, on the
+same clock as the ``t_rx_s`` it passes (docs/replay.md).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -67,7 +71,7 @@ class PipelineStats:
 
 
 class Pipeline:
-    """Decoder -> engine -> encoder, plus stream requests and heartbeat content."""
+    """Decoder -> engine -> encoder, plus stream requests and the periodic HEARTBEAT."""
 
     def __init__(self, config: Config | None = None) -> None:
         self.config = config or Config()
@@ -90,6 +94,9 @@ class Pipeline:
         self._short_streams: set[str] = set()
         self.alerts: list[Alert] = []
         """Every alert raised, in order (for the drivers' summaries)."""
+        self._heartbeat_period_s = 1.0 / self.config.link.heartbeat_rate_hz
+        self._next_heartbeat_s = -math.inf
+        """When our next HEARTBEAT is due (driver clock, s): at once before the first."""
 
     # ------------------------------------------------------------------ in
 
@@ -125,11 +132,28 @@ class Pipeline:
         if count > 0:
             self.decoder.bad_frame(count)
 
+    # ------------------------------------------------------------------ timer
+
+    def next_due_s(self) -> float:
+        """When :meth:`on_timer` next has something to send, on the driver's ``t_rx_s``
+        clock (s); ``-inf`` before the first call: due at once."""
+        return self._next_heartbeat_s
+
+    def on_timer(self, t_rx_s: float) -> list[bytes]:
+        """The periodic output due at ``t_rx_s`` (nothing when called early): our
+        HEARTBEAT, the next one a heartbeat period after ``t_rx_s``. A replay calls it
+        before the first message received at or after :meth:`next_due_s`, the service
+        when its timer wakes."""
+        if t_rx_s < self._next_heartbeat_s:
+            return []
+        self._next_heartbeat_s = t_rx_s + self._heartbeat_period_s
+        return [self.heartbeat()]
+
     # ------------------------------------------------------------------ out
 
     def heartbeat(self) -> bytes:
         """Our HEARTBEAT, with system_status from the navigation's health."""
-        mode = self.engine.monitor.mode
+        mode = self.engine.outage.mode
         if mode is NavMode.LOST:
             status = MAV_STATE_CRITICAL
         elif mode is NavMode.INIT:

@@ -1,9 +1,11 @@
 """Replay a recorded flight (.tlog) through the service, as fast as the CPU allows.
 
 Every message the service would send is written to the output .tlog, stamped
-with the input log's time of the message that caused it; our HEARTBEAT is
-clocked at 1 Hz of log time. The replay is deterministic: the same input and
-configuration give byte-identical output.
+with the input log's time of the message that caused it; the pipeline's periodic
+output (our HEARTBEAT, ``link.heartbeat_rate_hz`` of log time) is written when the
+first record at or after its due time is read, before that record's output. The
+replay is deterministic: the same input and configuration give byte-identical
+output (docs/replay.md).
 """
 
 from __future__ import annotations
@@ -68,16 +70,18 @@ def replay(
     wall0 = time.perf_counter()
     first_t: float | None = None
     last_t = 0.0
-    next_heartbeat_t: float | None = None
+    due_s = pipeline.next_due_s()
     count = 0
     with TlogWriter(out_path) as writer:
         for t_rx_s, msg in reader:
             if first_t is None:
                 first_t = t_rx_s
             last_t = t_rx_s
-            if next_heartbeat_t is None or t_rx_s >= next_heartbeat_t:
-                writer.write(t_rx_s, pipeline.heartbeat())
-                next_heartbeat_t = t_rx_s + 1.0 / pipeline.config.link.heartbeat_rate_hz
+            if t_rx_s >= due_s:
+                frames = pipeline.on_timer(t_rx_s)
+                if frames:
+                    writer.write_frames(t_rx_s, frames)
+                due_s = pipeline.next_due_s()
             frames = pipeline.on_message(msg, t_rx_s)
             if frames:
                 writer.write_frames(t_rx_s, frames)

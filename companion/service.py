@@ -7,8 +7,10 @@ Tasks:
   sent to every open link and to the flight recorder. A link that drops is
   re-opened every ``reconnect_s`` until it comes back (a serial adapter
   unplugged and plugged in again, a TCP peer restarting).
-* the heartbeat: our HEARTBEAT at ``heartbeat_rate_hz``, and the systemd
-  watchdog fed from the same loop only while every reader task is alive.
+* the timer: sleeps until the pipeline's next due time and sends its periodic
+  output (our HEARTBEAT at ``heartbeat_rate_hz``); the systemd watchdog is fed
+  from the same loop, at least twice per watchdog timeout, only while every
+  reader task is alive.
 
 SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
 recorder flushed, exit status 0.
@@ -23,6 +25,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import math
 import os
 import signal
 import time
@@ -77,7 +80,7 @@ class Service:
             asyncio.create_task(self._reader(name, url), name=f"reader-{name}")
             for name, url in urls.items()
         ]
-        heartbeat = asyncio.create_task(self._heartbeat(), name="heartbeat")
+        timer = asyncio.create_task(self._timer(), name="timer")
         self.notifier.notify("READY=1")
         log.info(
             "companion running: autopilot %s%s",
@@ -86,9 +89,9 @@ class Service:
         )
         await self._stop.wait()
         self.notifier.notify("STOPPING=1")
-        for task in (*self._readers, heartbeat):
+        for task in (*self._readers, timer):
             task.cancel()
-        for task in (*self._readers, heartbeat):
+        for task in (*self._readers, timer):
             with contextlib.suppress(asyncio.CancelledError):
                 await task
         for link in list(self._links.values()):
@@ -181,15 +184,27 @@ class Service:
             for link in list(self._links.values()):
                 await link.send(frame)
 
-    async def _heartbeat(self) -> None:
-        period_s = 1.0 / self.config.link.heartbeat_rate_hz
+    async def _timer(self) -> None:
+        """Send the pipeline's periodic output when due and feed the watchdog.
+
+        The pipeline's clock is the wall clock the readers stamp messages with
+        (``time.time()``): its next due time is mapped to a sleep from now. The sleep
+        is at most half the watchdog timeout systemd set, so that the watchdog is fed
+        whatever the heartbeat rate.
+        """
+        watchdog_s = self.notifier.watchdog_period_s
+        max_sleep_s = watchdog_s / 2.0 if watchdog_s else math.inf
         while True:
-            await self._send([self.pipeline.heartbeat()], time.time())
+            now_s = time.time()
+            frames = self.pipeline.on_timer(now_s)
+            if frames:
+                await self._send(frames, now_s)
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:
                 log.error("a link reader has died: not feeding the watchdog")
-            await asyncio.sleep(period_s)
+            sleep_s = min(self.pipeline.next_due_s() - time.time(), max_sleep_s)
+            await asyncio.sleep(max(sleep_s, 0.0))
 
 
 def run_service(config: Config) -> int:

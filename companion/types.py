@@ -1,6 +1,6 @@
 """Typed samples (into the core) and outputs (out of it).
 
-Conventions (see DESIGN.md):
+Conventions (docs/architecture.md):
 
 * SI units and radians everywhere; every name carries frame and unit
   (``acc_b_mps2`` is specific force in the body frame, ``vel_ned_mps`` velocity
@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+"""A float64 array; its shape is stated where it is used."""
 
 
 def largest_eigenvalue_2x2(a: float, b: float, c: float) -> float:
@@ -93,7 +94,7 @@ class AutopilotFlavour(enum.Enum):
 
 
 class NavMode(enum.Enum):
-    """Mode of the navigator (outage management, S1)."""
+    """Mode of the navigation, set by the outage management (:mod:`companion.nav.outage`)."""
 
     INIT = "init"  # no trusted fix yet
     NORMAL = "normal"  # fusing good GNSS
@@ -117,7 +118,7 @@ class Severity(enum.IntEnum):
 
 
 class AlertCode(enum.Enum):
-    """First word after ``CMP `` in a STATUSTEXT (DESIGN.md, alert catalogue)."""
+    """First word after ``CMP `` in a STATUSTEXT (the alert catalogue: docs/mavlink.md)."""
 
     GNSS_LOST = "GNSS_LOST"
     RTK_LOST = "RTK_LOST"
@@ -200,7 +201,14 @@ class GnssFix:
 
 @dataclass(frozen=True, slots=True)
 class RtkStatus:
-    """GPS_RTK / GPS2_RTK: health and baseline of the RTK solution."""
+    """GPS_RTK / GPS2_RTK: health and baseline of the RTK solution (receiver 0 / 1).
+
+    ``health`` and ``accuracy`` are the receiver's own figures as MAVLink carries
+    them; ``rate_hz`` is the rate of the corrections received; ``baseline_m``
+    (shape (3,)) is the baseline to the base station in the frame MAVLink's
+    ``baseline_coords_type`` gives (ECEF or NED); ``iar_num_hypotheses`` is the
+    number of integer-ambiguity hypotheses still open.
+    """
 
     t_s: float
     t_rx_s: float
@@ -208,7 +216,7 @@ class RtkStatus:
     health: int
     rate_hz: float
     satellites: int
-    baseline_m: FloatArray  # shape (3,), in the frame given by baseline_coords_type
+    baseline_m: FloatArray
     accuracy: int
     iar_num_hypotheses: int
 
@@ -291,6 +299,7 @@ Sample = (
     | RebootEvent
     | HeadingCommand
 )
+"""Anything the decoder gives the engine (:meth:`companion.engine.Engine.handle`)."""
 
 
 # --------------------------------------------------------------------------- outputs

@@ -41,6 +41,12 @@ def test_values_are_taken(tmp_path):
         ({"engine": {"publish_rate_hz": -1.0}}, "[engine] publish_rate_hz must be in"),
         ({"outage": {"reacquire_fixes": 1.5}}, "[outage] reacquire_fixes must be an integer"),
         ({"link": {"master": ""}}, "[link] master must name a link"),
+        ({"link": {"baud": 0}}, "[link] baud must be > 0, got 0"),
+        ({"link": {"heartbeat_rate_hz": 20}}, "[link] heartbeat_rate_hz must be in [0.1, 10]"),
+        ({"streams": {"raw_imu_hz": -1}}, "[streams] raw_imu_hz must be in [0, 1000], got -1.0"),
+        ({"engine": {"navigator": "kalman"}}, "[engine] navigator must be one of"),
+        ({"engine": {"status_rate_hz": 20}}, "[engine] status_rate_hz must be <= publish_rate_hz"),
+        ({"engine": {"primary_receiver": 2}}, "[engine] primary_receiver must be one of [0, 1]"),
     ],
 )
 def test_bad_values_are_one_line_errors_naming_the_key(data, message):

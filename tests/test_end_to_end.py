@@ -22,9 +22,9 @@ def scored(tmp_path: Path, name: str, config: str | None):
     return evaluate(out, FIXTURES / f"{name}.truth.csv")
 
 
-def test_rtk_outage_on_approach_is_bridged_within_s1_targets(tmp_path):
-    """The 20 s RTK-correction outage (tactical IMU): the issue's targets for 20 s are
-    <= 1.0 m 2-D and <= 0.2 m height (S1 reached 2.1-2.6 m and 0.31-0.35 m)."""
+def test_rtk_outage_on_approach_is_bridged_within_the_targets(tmp_path):
+    """The 20 s RTK-correction outage (tactical IMU): the targets for 20 s are <= 1.0 m
+    2-D and <= 0.2 m height (El-Mowafy (2005) reached 2.1-2.6 m and 0.31-0.35 m)."""
     ev = scored(tmp_path, "approach_rtk20", "tactical.toml")
     outage = next(g for g in ev.windows if g.kind == "rtk_outage")
     assert outage.h_max_m < 1.0

@@ -122,11 +122,11 @@ def test_stale_repeated_fixes_are_flagged_and_never_fused():
 
 def test_reboot_restarts_navigation():
     engine, _ = run(line_stream(5.0))
-    assert engine.navigator.initialised
+    assert engine.navigators.navigator.initialised
     engine.handle(RebootEvent(1.0, 100.0, 15.0))
-    assert not engine.navigator.initialised
+    assert not engine.navigators.navigator.initialised
     assert engine.stats.reboots == 1
-    assert engine.monitor.mode is NavMode.INIT
+    assert engine.outage.mode is NavMode.INIT
 
 
 def test_same_inputs_same_outputs():
@@ -183,7 +183,7 @@ def test_gnss_back_beyond_the_gate_reinitialises_instead_of_bridging_forever():
     back = alerts(outs, AlertCode.GNSS_BACK)
     assert back, "never re-acquired"
     assert 30.0 <= back[0].t_s - 10.0 < 30.0 + 0.1 * 30
-    assert engine.monitor.mode is NavMode.NORMAL
+    assert engine.outage.mode is NavMode.NORMAL
     last = solutions(outs)[-1]
     err = ORIGIN.lla_to_ned(last.lat_rad, last.lon_rad, last.alt_msl_m) - (
         line.pos_ned_m(last.t_s) + np.array([0.0, 500.0, 0.0])
@@ -203,7 +203,8 @@ def _imu_stops(stream, after_s):
 
 def _eager_fallback(engine):
     """The engine with its fallback fed at every fix (the reference the lazy feed must match)."""
-    engine._defer_to_fallback = lambda meas, gate: engine.fallback.on_gnss(meas, gate=gate)
+    navs = engine.navigators
+    navs.defer_to_fallback = lambda meas, gate: navs.fallback.on_gnss(meas, gate=gate)
     return engine
 
 
@@ -220,13 +221,13 @@ def test_the_fallback_fed_lazily_takes_over_as_if_fed_at_every_fix(backlog):
     for name in ("lazy", "eager"):
         engine = Engine(EngineConfig(navigator="blend", reanchor_distance_m=1000.0))
         if backlog is not None:
-            engine._fallback_backlog = deque(maxlen=backlog)
+            engine.navigators.backlog = deque(maxlen=backlog)
         if name == "eager":
             _eager_fallback(engine)
         noisy = line_stream(60.0, line=line, noise_m=0.02, seed=3)
         # the frame is re-anchored near t = 41.5 s, while the blend carries the solution
         _, outs[name] = run(_imu_stops(noisy, 55.0), engine)
-        assert engine.navigator is engine.fallback
+        assert engine.navigators.navigator is engine.navigators.fallback
         assert engine.stats.reanchors == 1
         assert not alerts(outs[name], AlertCode.FAULT)  # the IMU stopping is no GNSS fault
     lazy, eager = solutions(outs["lazy"]), solutions(outs["eager"])

@@ -1,5 +1,6 @@
-"""The engine's second opinions: the potential filter (S0) and the coasting inertial
-references (S3's separation set), on synthetic straight flights with known truth."""
+"""The engine's second opinions: the position-potential filter (Grzegorzewski 2005) and
+the coasting inertial references (the separation set of Kim, Walter and Powell), on
+synthetic straight flights with known truth."""
 
 from __future__ import annotations
 
@@ -54,8 +55,8 @@ def test_without_imu_the_potential_filter_bridges_a_gap():
     outs = run(no_imu(stream), engine)
     gap = bridged(outs)
     assert len(gap) >= 35
-    assert engine.navigator is engine.fallback and engine.frame is not None
-    pot = engine.potential
+    assert engine.navigators.navigator is engine.navigators.fallback and engine.frame is not None
+    pot = engine.bridge.potential
     assert pot is not None and pot.fit_count >= 1
     for sol in gap[::7]:  # what was published is the potential prediction
         pred = pot.predict(sol.t_s)
@@ -118,9 +119,10 @@ def ramped(stream, start_s: float, rate_mps: float):
 @pytest.mark.parametrize("inertial_reference", [True, False])
 def test_one_receiver_ramp_is_caught_only_against_the_inertial_reference(inertial_reference):
     """One receiver, tactical IMU, a vertical 4 cm/s ramp from 100 s: against the coasting
-    INS it is flagged before it reaches 1 m (S3's target); without a reference nothing sees
-    it. (Horizontal ramps of 4 cm/s are not caught in time with one receiver: tilt and
-    horizontal accelerometer bias let the coast drift too fast; bench/integrity.py.)"""
+    INS it is flagged before it reaches 1 m (Kim, Walter and Powell's target); without a
+    reference nothing sees it. (Horizontal ramps of 4 cm/s are not caught in time with one
+    receiver: tilt and horizontal accelerometer bias let the coast drift too fast;
+    bench/integrity.py.)"""
     start_s, rate = 100.0, 0.04
     stream = line_stream(160.0, noise_m=0.01, seed=6)
     engine = Engine(
@@ -140,10 +142,11 @@ def test_one_receiver_ramp_is_caught_only_against_the_inertial_reference(inertia
 
 
 def test_no_inertial_reference_on_the_ground_before_the_heading_is_trusted(tmp_path):
-    """The bundled taxi (tactical IMU, the autopilot's heading 1 deg off until S4 corrects
-    it) with the tactical configuration, inertial references on: taxi turns with a wrong
-    heading would put the coast metres off and exclude the only receiver. While the
-    autopilot says it is on the ground the references are neither anchored nor tested."""
+    """The bundled taxi (tactical IMU, the autopilot's heading 1 deg off until the taxi
+    heading correction corrects it) with the tactical configuration, inertial references
+    on: taxi turns with a wrong heading would put the coast metres off and exclude the only
+    receiver. While the autopilot says it is on the ground the references are neither
+    anchored nor tested."""
     from pathlib import Path
 
     from companion.config import load_config

@@ -40,7 +40,7 @@ def _replay(name: str, config: Config, monkeypatch: pytest.MonkeyPatch):
     on_gnss = BlendNavigator.on_gnss
 
     def spy(self, meas, *, gate=True):  # type: ignore[no-untyped-def]
-        mode = pipeline.engine.monitor.mode
+        mode = pipeline.engine.outage.mode
         update = on_gnss(self, meas, gate=gate)
         offers.append(Offer(meas.t_s, gate, mode, update.fused, update.nis, update.gate))
         return update

@@ -3,6 +3,8 @@ GNSS rate, readable by pymavlink; bad input is a one-line error and a non-zero e
 
 from __future__ import annotations
 
+import bisect
+import math
 import subprocess
 import sys
 from collections import Counter
@@ -13,6 +15,8 @@ import pytest
 from pymavlink import mavutil
 
 from companion.cli import main
+from companion.mavlink.tlog import TlogReader
+from companion.pipeline import Pipeline
 from companion.replay import replay
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,6 +64,29 @@ def test_output_reads_back_with_pymavlink_at_the_gnss_rate(replayed):
         assert np.max(np.diff(t[1:])) <= 0.1 + 0.010 + 1e-6, name
     assert kinds["HEARTBEAT"] == pytest.approx(summary.log_duration_s, abs=2)
     assert summary.messages_out == sum(kinds.values())
+
+
+def test_the_pipeline_clocks_its_heartbeat():
+    """The timer API: due at once, then a heartbeat period after each one sent."""
+    pipeline = Pipeline()
+    assert pipeline.next_due_s() == -math.inf
+    assert len(pipeline.on_timer(100.0)) == 1
+    assert pipeline.next_due_s() == 101.0
+    assert pipeline.on_timer(100.5) == []  # called early: nothing due
+    assert len(pipeline.on_timer(101.25)) == 1
+    assert pipeline.next_due_s() == 102.25
+    assert pipeline.stats.out_by_type["HEARTBEAT"] == 2
+
+
+def test_replayed_heartbeats_come_at_the_first_record_after_their_due_time(replayed):
+    _, first, _ = replayed
+    inputs = [t for t, _ in TlogReader(FIXTURE)]
+    beats = [t for t, msg in TlogReader(first) if msg.get_type() == "HEARTBEAT"]
+    assert beats[0] == pytest.approx(inputs[0], abs=1e-6)
+    for prev, beat in zip(beats, beats[1:], strict=False):
+        due = prev + 1.0
+        at = inputs[bisect.bisect_left(inputs, due - 1e-6)]
+        assert beat == pytest.approx(at, abs=1e-6)
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:

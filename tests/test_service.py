@@ -8,6 +8,8 @@ GPS_INPUT from component 191, then stops it with SIGTERM (exit status 0).
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import os
 import select
 import signal
@@ -20,9 +22,11 @@ from pathlib import Path
 
 import pytest
 
+from companion.config import Config, LinkConfig
 from companion.mavlink.frames import FrameParser
 from companion.mavlink.tlog import TlogReader
 from companion.mavlink.units import MAV_COMP_ID_ONBOARD_COMPUTER
+from companion.service import Service
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "sitl_fixtures" / "approach_rtk20.tlog"
@@ -99,6 +103,37 @@ def free_port(kind: int) -> int:
 def recorded(tmp_path: Path) -> int:
     files = list((tmp_path / "rec").glob("*.tlog"))
     return sum(f.stat().st_size for f in files)
+
+
+# ----------------------------------------------------------------------------- timer
+
+
+def _run_timer(heartbeat_rate_hz: float, watchdog_s: float | None, seconds: float):
+    """Run the service's timer alone for ``seconds``: (heartbeats sent, watchdog feeds)."""
+    link = LinkConfig(heartbeat_rate_hz=heartbeat_rate_hz, state_file="", record_dir="")
+    service = Service(Config(link=link))
+    service.notifier.watchdog_period_s = watchdog_s
+    fed: list[str] = []
+    service.notifier.notify = fed.append  # type: ignore[method-assign]
+
+    async def run() -> None:
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(service._timer(), seconds)
+
+    asyncio.run(run())
+    return service.pipeline.stats.out_by_type["HEARTBEAT"], fed.count("WATCHDOG=1")
+
+
+def test_the_timer_sleeps_until_the_pipeline_is_due():
+    beats, feeds = _run_timer(10.0, None, 0.55)
+    assert 3 <= beats <= 7  # at 0, 0.1, ... 0.5 s on an idle machine
+    assert feeds >= beats
+
+
+def test_the_watchdog_is_fed_whatever_the_heartbeat_rate():
+    beats, feeds = _run_timer(0.1, 0.2, 0.55)
+    assert beats == 1
+    assert feeds >= 3  # every 0.1 s (half the watchdog timeout) on an idle machine
 
 
 # ----------------------------------------------------------------------------- UDP

@@ -1,0 +1,66 @@
+"""The ``[engine]`` configuration block: publication rates, the local frame, the navigator.
+
+Each field's range is declared beside it (:mod:`companion.ranges`); the one check that
+relates two fields (``status_rate_hz <= publish_rate_hz``) is written out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from companion.ranges import check_ranges, ranged
+
+NAVIGATORS = ("blend", "singer", "passthrough")
+"""The navigators :attr:`EngineConfig.navigator` chooses from."""
+
+
+@dataclass(frozen=True, slots=True)
+class EngineConfig:
+    """Publication and frame handling of the engine."""
+
+    publish_rate_hz: float = ranged(10.0, gt=0.0, le=50.0)
+    """GLOBAL_POSITION_INT / GPS_INPUT rate on the autopilot clock (5-10 Hz for GPS_INPUT)."""
+    status_rate_hz: float = ranged(1.0, gt=0.0)
+    """Rate of the CMP_* NAMED_VALUE_FLOAT status values."""
+    reanchor_distance_m: float = ranged(20_000.0, ge=1000.0, finite=False)
+    """Re-anchor the local NED frame when the solution is this far from its anchor."""
+    navigator: str = ranged("blend", choices=NAVIGATORS)
+    """Which navigator carries the position: 'blend' (GNSS/INS, S1; with the pass-through
+    taking over while no IMU stream arrives), 'singer' (S2's manoeuvre model, no IMU) or
+    'passthrough' (GNSS with constant-velocity extrapolation)."""
+    imu_timeout_s: float = ranged(0.5, gt=0.0, le=5.0)
+    """The blend carries the solution only while an IMU sample is at most this old."""
+    primary_receiver: int = ranged(0, choices=(0, 1))
+    """The receiver fused normally; the other is fused only while this one is unusable
+    (and is always the integrity monitor's independent solution)."""
+    potential_bridge: bool = True
+    """Without an IMU stream, carry the solution through GNSS gaps (BRIDGING) with the
+    position-potential filter (S0) instead of the pass-through's constant velocity."""
+    potential_combine: bool = False
+    """With an IMU stream, publish through gaps the INS and potential predictions combined
+    by their covariances (their shared last-fix error as cross-covariance) while the two
+    agree (:func:`companion.nav.potential.combine_with_ins`). bench/potential.py part B,
+    RTK-fixed flights: 0.66-0.99 of the better of the two alone, approaches and turning
+    cruises; as a pseudo-measurement in the blend it was worse. But on the bundled
+    cruise_gnss_loss flight (MEMS, a minute of turns) it is worse than the INS alone
+    (mean 3.2 m against 2.9 m): off by default."""
+    inertial_reference: bool = False
+    """With the blend, keep free-inertial solutions coasting from staggered anchors
+    (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's
+    references: they do not contain the receivers' recent fixes, so a slow vertical ramp or
+    a sub-metre dither shows against them even with one receiver (S3's separation set).
+    Worth its cost (about 0.3 ms per fix) with a tactical IMU; a MEMS IMU drifts too fast
+    to catch anything the innovation test misses (bench/integrity.py)."""
+    potential_fix_test: bool = False
+    """Test each fix of the fused receiver against the potential prediction's ellipsoid
+    (S0) in the integrity monitor. Off by default: the prediction has no acceleration,
+    so the test trips at manoeuvre onsets (turns, rotation) where the blend's innovation
+    test, with the IMU, does not."""
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+        if self.status_rate_hz > self.publish_rate_hz:
+            raise ValueError(
+                f"status_rate_hz must be <= publish_rate_hz ({self.publish_rate_hz:g}), "
+                f"got {self.status_rate_hz!r}"
+            )

@@ -1,0 +1,433 @@
+"""The pure core's entry point: typed samples in, outputs out.
+
+``Engine.handle(sample)`` is the only call a driver makes (the live service
+and the tlog replay alike). It never opens a socket, reads a clock or imports
+pymavlink: time is the autopilot's ``t_s`` carried by the samples, so the same
+samples give the same outputs, bit for bit.
+
+What it does with a sample:
+
+* IMU and attitude go to the navigator (and attitude to the heading
+  corrector); every timed sample advances the engine's clock ``now_s``.
+* A GNSS fix is judged by the outage monitor (usable? stale? downgraded?),
+  converted into the local NED frame and offered to the navigator, which gates
+  it against its prediction; the verdict goes back to the outage monitor, the
+  fix and the navigator's verdict to the integrity monitor.
+* Whenever ``now_s`` crosses a publication tick (``publish_rate_hz`` on the
+  autopilot clock) the navigator's state is carried to ``now_s`` and published
+  as a :class:`NavSolution` (:mod:`companion.engine.publish`), also while GNSS
+  is silent, then clocked by the IMU/attitude stream.
+
+Its collaborators: :mod:`companion.engine.navigators` (which navigator carries
+the solution), :mod:`companion.engine.bridge` (the potential filter through
+gaps), :mod:`companion.engine.publish` (what a publication tick publishes).
+
+The local NED frame is anchored at the first usable fix and re-anchored when
+the solution is ``reanchor_distance_m`` from it. docs/architecture.md shows
+where the engine sits between the drivers and the estimators.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from companion.engine.bridge import PotentialBridge
+from companion.engine.config import EngineConfig
+from companion.engine.navigators import Navigators
+from companion.engine.publish import Publisher, publication_time_s
+from companion.integrity.coast import CoastConfig, InertialCoast
+from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
+from companion.nav.blend import BlendConfig, BlendNavigator
+from companion.nav.earth import gravity_ned_mps2
+from companion.nav.frames import LocalFrame
+from companion.nav.gnss import gnss_measurement
+from companion.nav.heading import HeadingConfig, HeadingCorrector
+from companion.nav.navigator import NavState, rotation_between_frames
+from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
+from companion.nav.potential import PotentialConfig
+from companion.types import (
+    Alert,
+    AlertCode,
+    AttitudeSample,
+    GnssFix,
+    HeadingCommand,
+    ImuSample,
+    LandedState,
+    LandedStateSample,
+    NavMode,
+    Output,
+    RebootEvent,
+    Sample,
+    VfrHudSample,
+)
+
+log = logging.getLogger(__name__)
+
+OUTAGE_TICK_S = 0.05
+"""Outage-clock resolution (s): GNSS_LOST is raised within this of its timeout."""
+
+_HEADING_CODES = frozenset({AlertCode.HDG_READY, AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT})
+"""Alerts that change :meth:`Engine.persistent_state`."""
+
+
+@dataclass(slots=True)
+class EngineStats:
+    """Counters a driver prints in its summary."""
+
+    gnss: Counter[str] = field(default_factory=Counter)
+    alerts: Counter[str] = field(default_factory=Counter)
+    solutions: int = 0
+    reboots: int = 0
+    reanchors: int = 0
+
+
+class Engine:
+    """Samples in, outputs out. See the module docstring."""
+
+    def __init__(
+        self,
+        config: EngineConfig | None = None,
+        outage: OutageConfig | None = None,
+        heading: HeadingConfig | None = None,
+        blend: BlendConfig | None = None,
+        integrity: IntegrityConfig | None = None,
+        potential: PotentialConfig | None = None,
+        coast: CoastConfig | None = None,
+    ) -> None:
+        self.config = config or EngineConfig()
+        self._outage_config = outage or OutageConfig()
+        self._heading_config = heading or HeadingConfig()
+        self._blend_config = blend or BlendConfig.for_grade("mems")
+        self._integrity_config = integrity or IntegrityConfig()
+        self._potential_config = potential or PotentialConfig()
+        self._coast_config = coast or CoastConfig.for_grade("mems")
+        self.state_changes = 0
+        """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
+        self._pending_state: dict[str, object] | None = None
+        self._sample_counts: Counter[type] = Counter()
+        self._publish_rate_hz = self.config.publish_rate_hz
+        self.stats = EngineStats()
+        self._handlers: dict[type, Callable[[object], list[Output]]] = {
+            ImuSample: self._on_imu,  # type: ignore[dict-item]
+            AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
+            GnssFix: self._on_gnss,  # type: ignore[dict-item]
+            LandedStateSample: self._on_landed,  # type: ignore[dict-item]
+            VfrHudSample: self._on_vfr_hud,  # type: ignore[dict-item]
+            HeadingCommand: self._on_heading_command,  # type: ignore[dict-item]
+            RebootEvent: self._on_reboot,  # type: ignore[dict-item]
+        }
+        self._reset()
+
+    def sample_counts(self) -> dict[str, int]:
+        """Samples handled, by type name."""
+        return {kind.__name__: n for kind, n in self._sample_counts.items()}
+
+    def _reset(self) -> None:
+        """Everything of one autopilot boot, from scratch (at start and after a reboot)."""
+        cfg = self.config
+        self.navigators = Navigators(cfg.navigator, self._blend_config, cfg.imu_timeout_s)
+        self.outage = OutageMonitor(self._outage_config)
+        """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
+        self.integrity = IntegrityMonitor(self._integrity_config)
+        self.bridge = PotentialBridge(cfg, self._potential_config)
+        self.publisher = Publisher(cfg.status_rate_hz, self.outage, self.integrity, self.bridge)
+        self.coast: InertialCoast | None = None
+        """The free-inertial references (with the blend, once the frame exists)."""
+        self._landed: LandedState | None = None
+        self._airborne = False
+        self._speed_mps: float | None = None
+        """Ground speed of the last published state (the stale-fix test's motion)."""
+        self._rx_last_usable_t_s: dict[int, float] = {}
+        self.frame: LocalFrame | None = None
+        self.now_s: float | None = None
+        self._publish_tick = -1
+        self._next_outage_tick_s = -math.inf
+        self._yaw_rad: float | None = None
+        """The autopilot's latest heading (ATTITUDE), uncorrected."""
+        self.heading = HeadingCorrector(self._heading_config)
+
+    # ------------------------------------------------------------------ entry point
+
+    def handle(self, sample: Sample) -> list[Output]:
+        """Take one sample; return what to publish (possibly nothing)."""
+        kind = type(sample)
+        self._sample_counts[kind] += 1
+        if self._pending_state is not None:
+            self._restore_now(sample.t_s)
+        handler = self._handlers.get(kind)
+        outputs = handler(sample) if handler is not None else []
+        t_s = sample.t_s
+        now = self.now_s
+        if now is None or t_s > now:
+            self.now_s = now = t_s
+        if self.outage.last_fused_t_s is not None:
+            # hot path (every IMU sample): the outage clock is ticked at most every
+            # OUTAGE_TICK_S, publication when the integer period index advances
+            # (publish.tick, inline)
+            if now >= self._next_outage_tick_s:
+                self._next_outage_tick_s = now + OUTAGE_TICK_S
+                outputs += self.outage.tick(now)
+            tick = math.floor(now * self._publish_rate_hz + 1e-6)
+            if tick > self._publish_tick:
+                self._publish_tick = tick
+                outputs += self._publish(now)
+        if not outputs:
+            return outputs
+        for out in outputs:
+            if isinstance(out, Alert):
+                self.stats.alerts[out.code.value] += 1
+                if out.code in _HEADING_CODES:
+                    self.state_changes += 1
+                if out.code is AlertCode.HDG_APPLIED:
+                    self._heading_applied()
+        return outputs
+
+    # ------------------------------------------------------------------ handlers
+
+    def _on_imu(self, sample: ImuSample) -> list[Output]:
+        if self.navigators.on_imu(sample) and self.coast is not None:
+            self.coast.on_imu(sample)
+        return []
+
+    def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
+        self._yaw_rad = sample.yaw_rad
+        if not self._airborne:  # the taxi heading correction runs before take-off
+            self.heading.on_attitude(sample)
+        correction_rad = self.heading.correction_rad
+        if self.navigators.on_attitude(sample, correction_rad) and self.coast is not None:
+            self.coast.on_attitude(sample, correction_rad)
+        return []
+
+    def _on_landed(self, sample: LandedStateSample) -> list[Output]:
+        state = sample.landed_state
+        self._landed = state
+        if state in (LandedState.IN_AIR, LandedState.LANDING):
+            self._airborne = True
+        on_ground = None if state is LandedState.UNDEFINED else state is LandedState.ON_GROUND
+        self.heading.on_landed_state(on_ground)
+        return []
+
+    def _on_vfr_hud(self, sample: VfrHudSample) -> list[Output]:
+        self.heading.on_vfr_hud(sample)
+        return []
+
+    def _on_heading_command(self, sample: HeadingCommand) -> list[Output]:
+        return self.heading.on_command(sample)
+
+    def _heading_applied(self) -> None:
+        """The navigators restart their heading error from the applied correction."""
+        applied = self.heading.applied
+        if applied is None:
+            return
+        sigma_rad = max(applied.eps_rad / self._heading_config.z_score, 1e-6)
+        self.navigators.reset_heading(sigma_rad)
+
+    def _on_reboot(self, sample: RebootEvent) -> list[Output]:
+        log.warning(
+            "autopilot reboot (clock %.1f s -> %.1f s): navigation restarts",
+            sample.previous_t_s,
+            sample.t_s,
+        )
+        self.stats.reboots += 1
+        self._reset()
+        return []
+
+    def _on_gnss(self, fix: GnssFix) -> list[Output]:
+        # the heading is corrected during the taxi before take-off (Markelov et al.); once
+        # airborne the correction (applied or not) stands for the rest of the flight
+        outputs: list[Output] = [] if self._airborne else self.heading.on_gnss(fix)
+        navs = self.navigators
+        navs.select(self.now_s)
+        verdict = self.outage.assess(fix, self._speed_mps)
+        outputs += verdict.alerts
+        if not verdict.usable:
+            self.stats.gnss[verdict.reason] += 1
+            return outputs
+        if self.frame is None:
+            self._anchor(LocalFrame(fix.lat_rad, fix.lon_rad, fix.alt_msl_m))
+        if self.frame is None:  # _anchor sets it; keeps mypy honest
+            raise ValueError("no local frame after anchoring")
+        meas = gnss_measurement(fix, self.frame)
+        # the references are for flight: on the ground, before the taxi correction, the
+        # autopilot's heading can be degrees off and taxi turns turn that into metres
+        refs = (
+            self.coast.references(meas.t_s)
+            if self.coast is not None and not self._on_ground()
+            else None
+        )
+        if not self._fuse_receiver(fix):
+            # the other receiver: the integrity monitor's independent solution only
+            self.stats.gnss[f"rx{fix.receiver_id}_monitored"] += 1
+            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            return outputs
+        if self.integrity.exclude(fix.receiver_id):
+            self.stats.gnss["excluded"] += 1
+            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            return outputs
+        if verdict.reinitialise:
+            navs.reinitialise(meas)
+            self.bridge.restart()
+            self.bridge.add_fix(meas)
+            outputs += self.outage.reinitialised(fix.t_s)
+            self.stats.gnss["reinitialised"] += 1
+            self.publisher.last_fused_fix = fix
+            return outputs
+        predicted = self.bridge.reference(meas.t_s)
+        update = navs.on_gnss(meas, verdict.gate)
+        if update.fused:
+            self.stats.gnss["fused"] += 1
+            self.publisher.last_fused_fix = fix
+            self.publisher.satellites = fix.satellites or 0
+            self.bridge.add_fix(meas)
+        else:
+            self.stats.gnss["gate_rejected" if update.reason == "gate" else update.reason] += 1
+        # after a gap the navigator's prediction, not the receiver, is what is uncertain: a
+        # failed innovation then is the outage logic's (gate, reacquire, re-initialise), and
+        # must not exclude the receiver (which would stop the re-initialisation forever)
+        bridged = verdict.gate and self.outage.mode in OUTAGE_MODES
+        outputs += self.integrity.on_fix(
+            fix, meas, None if bridged else update, predicted=predicted, references=refs
+        )
+        if update.fused or update.reason == "gate":
+            outputs += self.outage.gate_result(fix.t_s, update.fused)
+        return outputs
+
+    def _fuse_receiver(self, fix: GnssFix) -> bool:
+        """Fuse the primary receiver; the other only while the primary is unusable."""
+        self._rx_last_usable_t_s[fix.receiver_id] = fix.t_s
+        primary = self.config.primary_receiver
+        if fix.receiver_id == primary:
+            return True
+        last_primary = self._rx_last_usable_t_s.get(primary, -math.inf)
+        primary_down = (
+            fix.t_s - last_primary > self._outage_config.gnss_timeout_s
+            or self.integrity.exclude(primary)
+        )
+        return primary_down
+
+    # ------------------------------------------------------------------ persistence
+
+    def persistent_state(self) -> dict[str, object]:
+        """What must survive a restart of the service during a flight (JSON-safe):
+        the heading correction, tied to the autopilot clock it was made on."""
+        return {"t_s": self.now_s, "heading": self.heading.to_state()}
+
+    def restore(self, state: dict[str, object]) -> None:
+        """Restore :meth:`persistent_state` once the first sample shows the same
+        autopilot boot (its clock not behind the saved time); otherwise drop it."""
+        self._pending_state = state
+
+    def _restore_now(self, t_s: float) -> None:
+        state, self._pending_state = self._pending_state, None
+        if state is None:
+            return
+        saved_t = state.get("t_s")
+        if not isinstance(saved_t, int | float) or t_s < saved_t:
+            log.info("saved state is from an earlier autopilot boot: not restored")
+            return
+        heading = state.get("heading")
+        if not isinstance(heading, dict):
+            log.warning("saved state has no heading block: not restored")
+            return
+        try:
+            self.heading = HeadingCorrector.from_state(self._heading_config, heading)
+        except ValueError as exc:
+            log.warning("saved heading state rejected: %s", exc)
+            return
+        log.info("heading correction restored: %.3f deg", math.degrees(self.heading.correction_rad))
+
+    # ------------------------------------------------------------------ publication
+
+    def _state_now(self, t_s: float) -> NavState | None:
+        navs = self.navigators
+        navigator = navs.navigator
+        if not navigator.initialised:
+            return None
+        t_s = max(t_s, self.now_s or t_s)
+        state = navigator.predict(t_s)
+        if state is None:
+            return None
+        return self.bridge.carry(state, t_s, self.outage.mode, navigator is navs.fallback)
+
+    def _publish(self, now_s: float) -> list[Output]:
+        t_s = publication_time_s(now_s)
+        self.navigators.select(self.now_s)
+        state = self._state_now(t_s)
+        if state is None or self.frame is None:
+            return []
+        self._speed_mps = float(np.hypot(state.vel_ned_mps[0], state.vel_ned_mps[1]))
+        self._anchor_coast()
+        if self._maybe_reanchor(state):
+            state = self._state_now(t_s)
+            if state is None:  # shifting a state never uninitialises it; keeps mypy honest
+                return []
+        outputs = self.publisher.publish(
+            t_s, state, self.frame, self.heading, self._yaw_rad, self._landed
+        )
+        self.stats.solutions += 1
+        return outputs
+
+    # ------------------------------------------------------------------ frame and references
+
+    def _anchor(self, frame: LocalFrame) -> None:
+        self.frame = frame
+        self.navigators.shift_frame(frame, frame)
+        if self.navigators.primary is not None and self.config.inertial_reference:
+            gravity = gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
+            self.coast = InertialCoast(self._coast_config, gravity)
+
+    def _on_ground(self) -> bool:
+        """Not yet airborne by the autopilot's landed state (False when it sends none)."""
+        return not self._airborne and self._landed not in (None, LandedState.UNDEFINED)
+
+    def _anchor_coast(self) -> None:
+        """Re-anchor a due coasting slot from the blend at its newest IMU time, only while
+        the blend fuses trusted GNSS (never from a solution a fault may have pulled)."""
+        coast, blend = self.coast, self.navigators.primary
+        if (
+            coast is None
+            or not isinstance(blend, BlendNavigator)
+            or self.navigators.navigator is not blend
+        ):
+            return
+        if (
+            self._on_ground()
+            or self.outage.mode is not NavMode.NORMAL
+            or self.integrity.fault_detected
+        ):
+            return
+        t_s = blend.imu_t_s
+        if not coast.anchor_due(t_s):
+            return
+        state = blend.predict(t_s)
+        if state is not None:
+            bias_b_mps2, _ = blend.biases
+            coast.anchor(state, bias_b_mps2, blend.covariance[9:12, 9:12])
+
+    def _maybe_reanchor(self, state: NavState) -> bool:
+        """Re-anchor the frame at the solution when it is far from the anchor; True if it
+        did (states computed before are then in the old frame)."""
+        if self.frame is None or self.frame.distance_from_anchor_m(state.pos_ned_m) < (
+            self.config.reanchor_distance_m
+        ):
+            return False
+        lat, lon, alt = self.frame.ned_to_lla(state.pos_ned_m)
+        new = LocalFrame(lat, lon, alt)
+        navs = self.navigators
+        navs.sync_fallback()  # the fixes it has not taken are in the old frame
+        navs.shift_frame(self.frame, new)
+        self.integrity.shift_frame(self.frame, new)
+        if self.coast is not None:
+            offset = new.lla_to_ned(self.frame.lat0_rad, self.frame.lon0_rad, self.frame.alt0_m)
+            self.coast.shift_frame(rotation_between_frames(self.frame, new), offset)
+        self.bridge.restart()  # its window of fixes is in the old frame
+        self.frame = new
+        self.stats.reanchors += 1
+        log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
+        return True
