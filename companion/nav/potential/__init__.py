@@ -41,6 +41,7 @@ The package, in the order a fix goes through it:
   calibrated on the filter's own residuals;
 * :mod:`~companion.nav.potential.fit`: the self-learning of α and G (the
   paper's objective plus gap-prediction terms) by differential evolution;
+* :mod:`~companion.nav.potential.schedule`: when α and G are refitted;
 * :mod:`~companion.nav.potential.combine`: the INS and potential predictions
   combined through a gap;
 * :mod:`~companion.nav.potential.results`: :class:`FixTest`,

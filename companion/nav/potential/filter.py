@@ -24,12 +24,9 @@ covariance is used until the restarted window is refitted, which is due as
 soon as it spans ``first_fit_span_s``. A restart therefore always leads to a
 fit before the next test (no restart loop).
 
-A refit runs every ``refit_interval_s`` of fix time, sooner when the
-particle's speed has left a band around its speed at the last fit (a fit made
-parked or taxiing is not carried into flight) and before the first
-inconsistent fix of a run is rejected; the engine forces one at the start of
-a gap. After a fit the particle takes the fitted model's replayed state at
-the newest fix (``adopt_replay_state``).
+Refits follow :mod:`~companion.nav.potential.schedule`; after a fit the
+particle takes the fitted model's replayed state at the newest fix
+(``adopt_replay_state``).
 
 Cost: the last prediction is memoised (the engine predicts at a fix's time,
 then adds the fix, which tests it there).
@@ -49,6 +46,7 @@ from companion.nav.potential.calibration import Calibration, position_gains, whi
 from companion.nav.potential.config import PotentialConfig
 from companion.nav.potential.fit import choose_velocity, fit_alpha_g, fit_pairs, replay_state
 from companion.nav.potential.results import FixTest, PotentialPrediction
+from companion.nav.potential.schedule import RefitSchedule
 from companion.nav.potential.window import NAN3, ZERO3, Window, reset_velocity3
 from companion.types import FloatArray, NamedValue
 
@@ -125,8 +123,7 @@ class PotentialFilter:
         # per (anchor, calibration): truth offset, manoeuvre a², λ, λ used, and
         # the newest fix's variance over the calibration's fixes'
         self._pc: _PerAnchor | None = None
-        self._last_fit_t: float | None = None
-        self._last_fit_speed: float | None = None  # particle speed at the last fit [m/s]
+        self._schedule = RefitSchedule(self.config)
         # after a restart the model is suspect: no fix is tested until it is refitted
         self._await_fit = False
         self._last_fit_x: FloatArray | None = None  # (log10 α, log10 G) of the last fit
@@ -417,7 +414,7 @@ class PotentialFilter:
             and chi2_or_none > thr
             and not force
             and self._inconsistent_run == 0
-            and self._refit_allowed()
+            and self._schedule.allowed(self._anchor)
         ):
             # The first inconsistent fix of a run: the model may be the one at
             # fault (a turn or an acceleration begins). Refit on the window and
@@ -443,15 +440,9 @@ class PotentialFilter:
         return FixTest(t_s, chi2, thr, consistent, tested, True, "")
 
     def _restart(self, t_s: float) -> None:
-        """Restart the field and the particle from the pending run of inconsistent fixes.
-
-        The model, not the fixes, is taken to be wrong: the run of inconsistent
-        fixes (they agree with each other) becomes the window, keeping α, G and
-        the covariance calibration as the fit's warm start. The suspect model
-        tests no fix until it is refitted, which is due as soon as the
-        restarted window spans ``first_fit_span_s``: a restart cannot lead to
-        another restart before a fit (no restart loop).
-        """
+        """Restart the field and the particle from the pending run of inconsistent fixes
+        (they agree with each other), keeping α, G and the covariance calibration as
+        the fit's warm start; the model is suspect until refitted (module docstring)."""
         _log.warning(
             "potential: %d consecutive inconsistent fixes: restarting at t=%.3f s",
             self._inconsistent_run,
@@ -554,9 +545,9 @@ class PotentialFilter:
         if len(self._win) < c.min_fit_fixes or anc is None:
             return None
         t_new = anc.t_s
-        if not force and not self._refit_due(anc):
-            return None
         w = self._win
+        if not force and not self._schedule.due(anc, w.t[w.i1 - 1] - w.t[w.i0]):
+            return None
         t, pos, p, vreset, p0, v0 = w.replay_inputs(self._beta, self._order)
         if t.size < c.min_fit_fixes:
             return None
@@ -567,7 +558,7 @@ class PotentialFilter:
             t, pos, p, vreset, p0, v0, pairs, gain,
         )  # fmt: skip
         self.fit_count += 1
-        self._last_fit_t = t_new
+        self._schedule.last_fit_t = t_new
         self._await_fit = False
         self._cal.dirty = True
         self._last_fit_x = np.asarray(res.x, dtype=np.float64).copy()
@@ -592,40 +583,10 @@ class PotentialFilter:
         w.known[w.i1 - 1] = True
         a, b = self._sums(t_new)
         self._anchor = make_anchor(t_new, ppos, pvel, alpha, g, a, b)
-        self._last_fit_speed = float(np.linalg.norm(pvel))
+        self._schedule.last_fit_speed = float(np.linalg.norm(pvel))
         self._cal.add_residuals(alpha, g, t, pos, p, vreset, p0, v0, gain)
         _log.debug("potential: fit %d alpha=%.4g 1/s G=%.4g 1/s2", self.fit_count, alpha, g)
         return alpha, g
-
-    def _refit_due(self, anc: Anchor) -> bool:
-        """True when ``refit_interval_s`` has passed since the last fit (or the
-        particle's speed changed and ``refit_min_interval_s`` has), and the window
-        spans ``first_fit_span_s`` (or ``refit_interval_s`` if shorter)."""
-        c = self.config
-        if self._last_fit_t is not None:
-            since = anc.t_s - self._last_fit_t
-            if since < c.refit_interval_s and not (
-                since >= c.refit_min_interval_s and self._speed_changed(anc)
-            ):
-                return False
-        w = self._win
-        return not w.t[w.i1 - 1] - w.t[w.i0] < min(c.refit_interval_s, c.first_fit_span_s)
-
-    def _refit_allowed(self) -> bool:
-        """True when ``refit_min_interval_s`` of fix time has passed since the last fit."""
-        anc = self._anchor
-        if anc is None or self._last_fit_t is None:
-            return anc is not None
-        return anc.t_s - self._last_fit_t >= self.config.refit_min_interval_s
-
-    def _speed_changed(self, anc: Anchor) -> bool:
-        """True when the particle's speed left the band around its speed at the last fit."""
-        v_fit = self._last_fit_speed
-        if v_fit is None or not anc.vel_known:
-            return False
-        c = self.config
-        v = math.sqrt(float(anc.vel_ned_mps @ anc.vel_ned_mps))
-        return abs(v - v_fit) > c.refit_speed_change_mps + c.refit_speed_change_rel * v_fit
 
     def outputs(self, t_s: float) -> list[NamedValue]:
         """The fitted α [1/s] and G [1/s²] as NAMED_VALUE_FLOAT ``CMP_PALPHA``, ``CMP_PG``."""
