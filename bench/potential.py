@@ -1,9 +1,10 @@
-"""Benchmark of the position-potential filter (S0): accuracy through gaps and cost per call.
+"""Benchmark of the position-potential filter (Grzegorzewski 2005): accuracy through gaps
+and cost per call.
 
 Run: ``python bench/potential.py`` (all parts, several minutes), or
 ``--part A|timing|B``, ``--seeds N`` (part A), ``--b-seeds N`` (part B, default 10).
 
-Part A (S0's case, 2-s gaps): closed-form kinematic descents generated here
+Part A (the paper's case, 2-s gaps): closed-form kinematic descents generated here
 (no simulator needed) -- level flight, approach entry (deceleration from
 80 to 60 m/s while the flight-path angle goes from 0 to -3 deg), a stable
 3-deg glide, a flare (-3 deg to 0 with deceleration) -- with DGPS-like fixes
@@ -19,7 +20,7 @@ run). Errors are 3-D position errors at the end of each gap [m].
 Timing: per-call cost of test_fix, predict, add_fix and a fit at 10 Hz with a
 full window, beside the constant-velocity extrapolator's cost in the same run.
 
-Part B (issue 5): the project simulator's approach (RTK fixed, 10 Hz), tactical
+Part B: the project simulator's approach (RTK fixed, 10 Hz), tactical
 and MEMS IMU, all GNSS withheld for 5, 10, 20 s from 40 s into the glide
 (``bench/outage.py``'s flights, gap placement and driver ``run_one``). Through
 the gap at 10 Hz: constant velocity, the potential filter alone, the INS blend
@@ -91,7 +92,7 @@ def _smooth(x: FloatArray) -> FloatArray:
 
 
 def kinematic_descent(seed: int, rate_hz: float = 5.0) -> Flight:
-    """S0-like TS-11 descent: level, approach entry, stable glide, flare, level-off."""
+    """A TS-11 descent like the paper's: level, approach entry, stable glide, flare, level-off."""
     # segments: (name, duration s, speed at end m/s, flight-path angle at end deg)
     segs = [
         ("level", 20.0, 80.0, 0.0),
@@ -592,7 +593,9 @@ def main(argv: list[str] | None = None) -> int:
             fl = kinematic_descent(s)
             run_flight(fl, (2.0,), 0.5, 25.0, res_a, lambda lab: True, seed=s)
         table(
-            res_a, (2.0,), "Part A - S0's case: 2-s gaps on a kinematic descent (DGPS-like, 5 Hz)"
+            res_a,
+            (2.0,),
+            "Part A - the paper's case: 2-s gaps on a kinematic descent (DGPS-like, 5 Hz)",
         )
         fits_table(res_a)
     if args.part in ("all", "timing"):

@@ -1,4 +1,5 @@
-"""Tests of the position-potential filter (S0): closed form, fit, fix test, covariance."""
+"""Tests of the position-potential filter (Grzegorzewski 2005): closed form, fit, fix test,
+covariance."""
 
 from __future__ import annotations
 
@@ -102,12 +103,12 @@ def test_transition_rejects_bad_input() -> None:
 
 
 def test_large_alpha_w_form_equals_general_form() -> None:
-    # S0: for large α only the newest fix matters and
+    # Grzegorzewski (2005): for large α only the newest fix matters and
     # k(t) = k_0n + W1(t) Δk_n + W2(t) k̇_n with A_k ≈ 2 p_kn, and p_kn = 1 with
     # the weights relative to the newest fix's (G·A independent of σ).
     rng = np.random.default_rng(3)
     n = 8
-    t_src = np.arange(n) * 2.0  # S0's 2-s steps
+    t_src = np.arange(n) * 2.0  # the paper's 2-s steps
     pos_src = np.cumsum(rng.normal(0.0, 50.0, (n, 3)), axis=0)
     var = np.array([0.5, 0.8, 2.0])
     p_src = np.tile(1.0 / var, (n, 1))
@@ -152,14 +153,14 @@ def _model_track(
     return np.array(ts), np.vstack(ps), np.vstack(vs), var
 
 
-# S0's stable-descent and descent-rate-change values and two stiffer fields.
+# The paper's stable-descent and descent-rate-change values and two stiffer fields.
 # Known limit (not hidden): for α ≲ 1.5 1/s the global valley of the objective
 # is narrower than the seeding grid and the population can settle in the broad
 # basin at the α upper bound; those cases are not claimed here.
 @pytest.mark.parametrize(("alpha", "g"), [(2.84, 0.35), (3.82, 0.54), (8.0, 2.0), (6.0, 20.0)])
 def test_fit_recovers_model_alpha_and_g(alpha: float, g: float) -> None:
     ts, pos, vel, var = _model_track(alpha, g)
-    # S0's objective alone (the multi-step terms are not zero on model data:
+    # the paper's objective alone (the multi-step terms are not zero on model data:
     # a frozen-field prediction ignores the sources added along the way)
     cfg = PotentialConfig(
         window_s=20.0, velocity_mode="carried", alpha0_ps=1.0, g0_ps2=1.0,
@@ -401,7 +402,7 @@ def test_config_is_validated() -> None:
         {"max_sources": 0},
         {"g_bounds_ps2": (0.0, 1.0)},
     ):
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match=next(iter(bad))):
             PotentialConfig(**bad)  # type: ignore[arg-type]
 
 
@@ -492,7 +493,7 @@ def test_filter_fast_prediction_equals_general_closed_form() -> None:
     # the filter's per-anchor form (precomputed Bessel constants at s0) against
     # propagate_state over the branches: scipy range, small-argument series
     # (long horizons, tiny G·A), large s0 (falls back), mixed axes
-    from companion.nav.potential import _anchor_propagate, _make_anchor
+    from companion.nav.potential.anchor import anchor_propagate, make_anchor
 
     rng = np.random.default_rng(21)
     pos = np.array([120.0, -40.0, -300.0])
@@ -501,9 +502,9 @@ def test_filter_fast_prediction_equals_general_closed_form() -> None:
         for g in (1e-9, 1e-3, 0.35, 50.0):
             a = np.array([4.0, 4.0, 1.0]) * 10.0 ** rng.uniform(0.0, 3.0)
             b = a * (pos - rng.normal(0.0, 20.0, 3))
-            anc = _make_anchor(0.0, pos, vel, alpha, g, a, b)
+            anc = make_anchor(0.0, pos, vel, alpha, g, a, b)
             for h in (0.0, 0.013, 0.1, 1.0, 5.0, 20.0, 300.0):
-                p_fast, v_fast = _anchor_propagate(anc, h)
+                p_fast, v_fast = anchor_propagate(anc, h)
                 p_ref, v_ref = propagate_state(pos, vel, a, b, g, alpha, h)
                 scale = 1.0 + np.abs(p_ref - pos).max()
                 np.testing.assert_allclose(p_fast, p_ref, rtol=0, atol=1e-9 * scale)
@@ -526,7 +527,7 @@ def test_replay_functions_share_one_replay() -> None:
     sp, sv = replay_state(al, g, ts, meas, p, reset, meas[0], vel[0])
     np.testing.assert_array_equal(sp, apos[-1])
     np.testing.assert_array_equal(sv, avel[-1])
-    # the field sums are S0's sums at each fix; each carried position is the
+    # the field sums are the paper's sums at each fix; each carried position is the
     # frozen-field prediction from the previous fix
     for i in (0, 7, ts.size - 1):
         a_ref, b_ref = field_sums(ts[: i + 1], meas[: i + 1], p[: i + 1], al, ts[i])
