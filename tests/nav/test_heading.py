@@ -1,4 +1,4 @@
-"""Tests of the taxi heading correction (S4) against simulated truth.
+"""Tests of the taxi heading correction (Markelov et al.) against simulated truth.
 
 The streams come from a small generator of parked stands, straight legs and
 turns (below): the truth heading is integrated from the yaw rate, the INS
@@ -629,6 +629,11 @@ def test_bad_input_is_counted_not_fatal() -> None:
         ("max_speed_mps", 1.0),
         ("ground_crab_deg", 90.0),
         ("park_window_s", 5.0),
+        ("spread_start_cycle", 1),
+        ("spread_start_cycle", 100),
+        ("min_leg_cycles", 2),
+        ("attitude_buffer_s", 1.0),
+        ("pos_baseline_s", 3.0),
     ],
 )
 def test_config_validation_names_the_field(name: str, value: object) -> None:
