@@ -7,11 +7,12 @@ between ``min_speed_mps`` and ``max_speed_mps``, and the fix is at least
 ``min_fix_type`` with a velocity accuracy of at most ``max_vel_acc_mps``. Its
 mismatch enters the running statistics (:mod:`~companion.nav.heading.stats`);
 once the sample is sufficient the acceptance criteria
-(:mod:`~companion.nav.heading.criteria`) make it READY or reject it:
+(:mod:`~companion.nav.heading.criteria`) make it READY or reject it.
 
-    ACCUMULATING -> READY -> APPLIED
-         ^            |
-         +- rejected -+ (or refused by the ground station)
+Phases (:class:`~companion.nav.heading.state.HeadingPhase`): ACCUMULATING ->
+READY (all criteria hold) -> APPLIED (confirmed, or ``auto_apply``). A failed
+criterion, or a position-track sample losing RTK, starts the accumulation over;
+the ground station's refusal sends READY back to ACCUMULATING.
 
 Pure: no I/O, no clock; time comes from the samples.
 """

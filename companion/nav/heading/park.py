@@ -30,7 +30,7 @@ class ParkCheck:
         self.config = config
         self._start_t: float | None = None
         self._vel: list[tuple[float, float, float]] = []  # (t, vn, ve) of the window
-        self._recent: list[tuple[float, float, float]] = []  # the last park_smooth_s
+        self._recent: list[tuple[float, float, float]] = []  # (t, vn, ve) of park_smooth_s
         self._last_eval_t: float | None = None
         self.ok: bool | None = None
         """Latest check: passed, failed, or ``None`` when not done."""
@@ -49,24 +49,24 @@ class ParkCheck:
         return park_bias_verdict(vel_ne_mps, self.config.park_alpha, self.config.park_max_bias_mps)
 
     def step(
-        self, fix: GnssFix, vn: float, ve: float, speed: float, ground: GroundState
+        self, fix: GnssFix, vn_mps: float, ve_mps: float, speed_mps: float, ground: GroundState
     ) -> str | None:
-        """One fix with velocity (``vn``, ``ve``) and ground speed ``speed`` (m/s).
+        """One fix: its north and east velocity and its ground speed, m/s.
 
         Returns the reason of a failed check to announce (once), else ``None``.
         """
         cfg = self.config
-        self._recent.append((fix.t_s, vn, ve))
+        self._recent.append((fix.t_s, vn_mps, ve_mps))
         while self._recent and self._recent[0][0] < fix.t_s - cfg.park_smooth_s:
             self._recent.pop(0)
         m_n = sum(v[1] for v in self._recent) / len(self._recent)
         m_e = sum(v[2] for v in self._recent) / len(self._recent)
-        if speed >= cfg.min_speed_mps or math.hypot(m_n, m_e) > cfg.park_speed_mps:
+        if speed_mps >= cfg.min_speed_mps or math.hypot(m_n, m_e) > cfg.park_speed_mps:
             self.reset()
             return None
         if self._start_t is None:
             self._start_t = fix.t_s
-        self._vel.append((fix.t_s, vn, ve))
+        self._vel.append((fix.t_s, vn_mps, ve_mps))
         # ground reference altitude: the mean of parked fixes
         ground.add_parked_altitude(fix.alt_msl_m)
         horizon = fix.t_s - cfg.park_window_s
