@@ -1,6 +1,8 @@
-"""Bench: taxi heading correction (S4) on seeded simulated taxis, against a one-shot baseline.
+"""Bench: taxi heading correction on seeded simulated taxis, against a one-shot baseline.
 
-Each run simulates a taxi with the project simulator (``companion.sim``, scenario
+The correction is that of Markelov et al., "INS course correction from
+satellite navigation before take-off" (:mod:`companion.nav.heading`). Each run
+simulates a taxi with the project simulator (``companion.sim``, scenario
 ``taxi``: RTK fixed positions) with drawn overrides: initial heading error
 U(-3, 3) deg, taxi speed U(3, 10) m/s, GNSS velocity noise U(0.05, 0.2) m/s
 (1 sigma per axis, 10 Hz), 3-6 straight legs of 20-60 s joined by turns of
@@ -23,9 +25,10 @@ then) and ``uncorrected`` (the ATTITUDE yaw error at the default READY instant).
 
 Time to READY is given both as the straight-taxi time used (cycles x cycle
 period) and as the taxi time since the taxi began. The bench also prints the
-time the S4 sufficiency rule needs in theory, ``(1.96 sigma / eps)^2`` cycles
-with ``sigma^2`` the expected track variance plus the INS term, so a run that
-cannot be ready in 60 s is told apart from an implementation shortfall.
+time the sufficiency rule of Markelov et al. needs in theory,
+``(1.96 sigma / eps)^2`` cycles with ``sigma^2`` the expected track variance
+plus the INS term, so a run that cannot be ready in 60 s is told apart from an
+implementation shortfall.
 
 Run: ``python bench/heading.py [--runs 100] [--seed 1]`` (a few minutes;
 progress on stderr).
@@ -67,7 +70,7 @@ GNSS_RATE_HZ = 10.0
 
 
 @dataclass
-class S4Result:
+class CorrectorResult:
     """One configuration on one flight."""
 
     pred_ready_s: float
@@ -88,7 +91,7 @@ class RunResult:
     noise_mps: float
     err_inj_deg: float
     total_straight_s: float
-    s4: dict[str, S4Result]
+    by_config: dict[str, CorrectorResult]
     base_err_deg: float = math.nan
     base_taxi_s: float = math.nan
 
@@ -135,9 +138,11 @@ def predicted_ready_s(config: HeadingConfig, speed_mps: float, noise_mps: float)
     return max(cycles, min_cycles) * cycle_period_s(config)
 
 
-def run_s4(flight: SimFlight, config: HeadingConfig, speed: float, noise: float) -> S4Result:
+def run_corrector(
+    flight: SimFlight, config: HeadingConfig, speed: float, noise: float
+) -> CorrectorResult:
     sc = flight.scenario
-    res = S4Result(pred_ready_s=predicted_ready_s(config, speed, noise))
+    res = CorrectorResult(pred_ready_s=predicted_ready_s(config, speed, noise))
     taxi_start = next((t0 for ph, t0, _ in flight.phases if ph == "taxi"), math.nan)
     att_t = flight.errors.attitude_t_s
     att_yaw_err = flight.errors.attitude_err_rad[:, 2]
@@ -192,7 +197,7 @@ def one_run(seed: int, configs: dict[str, HeadingConfig]) -> RunResult:
         noise_mps=noise,
         err_inj_deg=sc.heading_error_deg,
         total_straight_s=sum(length for length, _ in sc.taxi_legs) / speed,
-        s4={name: run_s4(flight, cfg, speed, noise) for name, cfg in configs.items()},
+        by_config={name: run_corrector(flight, cfg, speed, noise) for name, cfg in configs.items()},
     )
     # baseline: the GNSS course of the first fix above 5 m/s becomes the heading
     taxi_start = next((t0 for ph, t0, _ in flight.phases if ph == "taxi"), math.nan)
@@ -236,16 +241,16 @@ GRADE = make_scenario("taxi").imu_grade
 
 CONFIGS: dict[str, HeadingConfig] = {
     "default (auto: RTK position track)": HeadingConfig(),
-    "velocity track (S4), eps<=0.05": HeadingConfig(track_source="velocity"),
-    "velocity track (S4), eps<=0.085": HeadingConfig(
+    "velocity track, eps<=0.05": HeadingConfig(track_source="velocity"),
+    "velocity track, eps<=0.085": HeadingConfig(
         track_source="velocity", eps_limit_deg=TARGET_MAX_ERR_DEG / 1.96
     ),
 }
 """Configurations run on the same flights: the service's default (``auto``: the
 track from the RTK displacement over 1 s while fixes are RTK fixed, as they are
-in these taxis), S4 as published (the track from each fix's Doppler velocity),
-and S4 with the sufficiency limit that makes its 95 % accuracy match the bench's
-error target."""
+in these taxis), the method as published by Markelov et al. (the track from
+each fix's Doppler velocity), and the same with the sufficiency limit that makes
+its 95 % accuracy match the bench's error target."""
 
 
 def main() -> int:
@@ -270,7 +275,10 @@ def main() -> int:
     base = np.array([r.base_err_deg for r in results])
     base_max = float(np.nanmax(np.abs(base))) if np.isfinite(base).any() else math.nan
     print()
-    print(f"Taxi heading correction (S4), {n} seeded simulated taxis (seed base {args.seed})")
+    print(
+        f"Taxi heading correction (Markelov et al.), {n} seeded simulated taxis "
+        f"(seed base {args.seed})"
+    )
     print("draws: heading error U(-3,3) deg, speed U(3,10) m/s, GNSS velocity noise")
     print("U(0.05,0.2) m/s (1 sigma/axis) at 10 Hz, 3-6 legs of 20-60 s, turns 45-180 deg;")
     sigma_rad, tau_s = ATTITUDE_ERROR_BY_GRADE[GRADE]
@@ -282,23 +290,23 @@ def main() -> int:
     print("|error| in deg over the runs that produced a heading; ratio = max / one-shot max")
     print(f"{'method':<46} {'runs':>9} {'median':>8} {'95 %':>8} {'max':>8} {'max/base':>9}")
     for name in CONFIGS:
-        rs = [r.s4[name] for r in results]
+        rs = [r.by_config[name] for r in results]
 
-        def col(attr: str, rs: list[S4Result] = rs) -> np.ndarray:
+        def col(attr: str, rs: list[CorrectorResult] = rs) -> np.ndarray:
             return np.array([getattr(x, attr) for x in rs], dtype=float)
 
         print(err_row(f"{name} mean-inj", col("err_mean_deg"), n, base_max))
         print(err_row(f"{name} heading", col("err_heading_deg"), n, base_max))
         print(err_row(f"{name} estimator", col("err_estimator_deg"), n, base_max))
     name0 = next(iter(CONFIGS))
-    unc = np.array([r.s4[name0].err_uncorrected_deg for r in results])
+    unc = np.array([r.by_config[name0].err_uncorrected_deg for r in results])
     print(err_row("uncorrected (at default READY)", unc, n, base_max))
     print(err_row("one-shot course > 5 m/s", base, n, base_max))
     print()
     print("time to a heading, s (runs that produced one)")
     print(f"{'method':<54} {'median':>8} {'95 %':>8} {'max':>8}")
     for name in CONFIGS:
-        rs = [r.s4[name] for r in results if r.s4[name].ready]
+        rs = [r.by_config[name] for r in results if r.by_config[name].ready]
         print(time_row(f"{name}: straight taxi used", np.array([x.straight_s for x in rs])))
         print(time_row(f"{name}: since taxi start", np.array([x.taxi_s for x in rs])))
     bt = base[np.isfinite(base)]
@@ -311,14 +319,14 @@ def main() -> int:
     print(f"one-shot never aligned (taxi never above 5 m/s): {n - bt.size}/{n}")
     print()
     for name, cfg in CONFIGS.items():
-        rs = [r.s4[name] for r in results]
+        rs = [r.by_config[name] for r in results]
         ready = np.array([x.ready for x in rs])
         in60 = np.array([x.ready and x.straight_s <= TARGET_READY_S for x in rs])
         feasible = np.array([x.pred_ready_s <= TARGET_READY_S for x in rs])
         rejected = sum(1 for x in rs if x.rejects)
         errs = np.abs(np.array([x.err_mean_deg for x in rs if x.ready]))
         print(
-            f"S4 {name}: READY {int(ready.sum())}/{n}; within {TARGET_READY_S:.0f} s of "
+            f"{name}: READY {int(ready.sum())}/{n}; within {TARGET_READY_S:.0f} s of "
             f"straight taxi {int(in60.sum())}/{n} ({100.0 * in60.mean():.0f} %); "
             f"runs with HDG_REJECT {rejected}"
         )

@@ -87,7 +87,8 @@ def test_published_heading_is_corrected_against_truth(taxi_messages):
         if not 0 < k < len(truth) or truth["t_s"][k] - t > 1e-6:
             continue  # only the 10 Hz instants where truth is given exactly
         turn_dps = abs((truth["yaw_deg"][k] - truth["yaw_deg"][k - 1] + 180) % 360 - 180) * 10
-        if turn_dps > 1.0:  # straight taxi only (S4's own criterion); see the note below
+        # straight taxi only (the criterion of Markelov et al.); see the note below
+        if turn_dps > 1.0:
             continue
         err = ((m.hdg / CDEG_PER_RAD) * 180 / math.pi - truth["yaw_deg"][k] + 180) % 360 - 180
         (after if t > applied_at + 1.0 else before).append(err)

@@ -3,8 +3,8 @@
 Detects loss (message timeout, no fix), downgrade (RTK fixed -> float -> DGPS/3D
 -> none, an accuracy jump, old RTK corrections) and stale fixes (the receiver
 repeating or freezing its last corrected co-ordinates while the aircraft moves:
-the failure S0 reports from flight trials, with errors up to 2 km at jet
-speed). It runs the mode machine
+the failure Grzegorzewski (2005) reports from flight trials, with errors up to
+2 km at jet speed). It runs the mode machine
 
     INIT -> NORMAL <-> DEGRADED
               |  ^          |
@@ -20,10 +20,14 @@ the navigator's gate verdict back with :meth:`OutageMonitor.gate_result`.
 
 Pure: no I/O, no clock; time comes from the samples.
 
+The alerts are :class:`~companion.types.AlertCode` values; the modes are
+described in ``docs/architecture.md``.
+
 References
 ----------
-S0 (Grzegorzewski 2005), stale DGPS/RTK co-ordinates; S1 (El-Mowafy 2005),
-correction outages and GNSS de-weighting; DESIGN.md alert catalogue.
+Grzegorzewski (2005), "Navigating by a position potential in 3-D": stale
+DGPS/RTK co-ordinates. El-Mowafy (2005), RTK networks for precision approach
+with an adaptive GPS/INS blend: correction outages and GNSS de-weighting.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import math
 from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
+from companion.ranges import check_ranges, ranged
 from companion.types import Alert, AlertCode, FixType, GnssFix, NavMode, Severity
 
 log = logging.getLogger(__name__)
@@ -47,50 +52,34 @@ carried without GNSS."""
 class OutageConfig:
     """Thresholds of the outage logic (all times on the autopilot clock)."""
 
-    gnss_timeout_s: float = 1.0
+    gnss_timeout_s: float = ranged(1.0, gt=0.0, finite=False)
     """No usable fix for this long -> GNSS_LOST and BRIDGING. Five missed epochs at 5 Hz."""
-    min_fix_type: int = int(FixType.FIX_3D)
+    min_fix_type: int = ranged(int(FixType.FIX_3D), ge=0, le=int(FixType.PPP))
     """Fixes below this type are not usable (2-D fixes carry no height)."""
-    max_bridge_s: float = 120.0
+    max_bridge_s: float = ranged(120.0, gt=0.0, finite=False)
     """Bridging longer than this -> LOST (the published fix type drops to none)."""
-    reacquire_fixes: int = 3
+    reacquire_fixes: int = ranged(3, ge=1)
     """Consecutive fixes that must pass the gate after an outage before GNSS_BACK."""
-    reacquire_max_rejects: int = 25
+    reacquire_max_rejects: int = ranged(25, ge=1)
     """After this many consecutive gate rejections while reacquiring, the navigator is
     re-initialised from GNSS (its prediction, not the fixes, is then what is wrong)."""
     stale_min_speed_mps: float = 1.0
     """Repeated co-ordinates are legitimate when parked: staleness is judged above this speed."""
-    stale_repeats: int = 2
+    stale_repeats: int = ranged(2, ge=1)
     """Bit-identical consecutive positions (while moving) that make a fix stale."""
-    stale_motion_ratio: float = 0.2
+    stale_motion_ratio: float = ranged(0.2, gt=0.0, lt=1.0)
     """A fix that moved less than this fraction of the navigator's predicted motion ..."""
-    stale_window_s: float = 1.0
+    stale_window_s: float = ranged(1.0, gt=0.0, finite=False)
     """... over at least this long is frozen (stale) even if not bit-identical."""
-    accuracy_jump_ratio: float = 4.0
+    accuracy_jump_ratio: float = ranged(4.0, gt=1.0, finite=False)
     """h_acc growing by this factor over its recent best marks the fix DEGRADED."""
-    rtk_max_age_s: float = 10.0
+    rtk_max_age_s: float = ranged(10.0, gt=0.0, finite=False)
     """RTK / DGPS corrections older than this (GPS2_RAW dgps_age) are treated as lost."""
-    downgrade_memory_s: float = 600.0
+    downgrade_memory_s: float = ranged(600.0, gt=0.0, finite=False)
     """The best fix type seen within this window is what 'not degraded' means."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "gnss_timeout_s",
-            "max_bridge_s",
-            "stale_window_s",
-            "rtk_max_age_s",
-            "downgrade_memory_s",
-        ):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0")
-        if not 0 <= self.min_fix_type <= int(FixType.PPP):
-            raise ValueError("min_fix_type must be a MAVLink GPS_FIX_TYPE (0-8)")
-        if self.reacquire_fixes < 1 or self.reacquire_max_rejects < 1 or self.stale_repeats < 1:
-            raise ValueError("reacquire_fixes, reacquire_max_rejects, stale_repeats must be >= 1")
-        if not 0.0 < self.stale_motion_ratio < 1.0:
-            raise ValueError("stale_motion_ratio must be in (0, 1)")
-        if self.accuracy_jump_ratio <= 1.0:
-            raise ValueError("accuracy_jump_ratio must be > 1")
+        check_ranges(self)
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,4 +1,4 @@
-"""Tests of the taxi heading correction (S4) against simulated truth.
+"""Tests of the taxi heading correction (Markelov et al.) against simulated truth.
 
 The streams come from a small generator of parked stands, straight legs and
 turns (below): the truth heading is integrated from the yaw rate, the INS
@@ -268,7 +268,7 @@ def test_yaw_interpolation_is_angle_aware() -> None:
     a = math.radians(179.8)
     hc.on_attitude(AttitudeSample(0.0, 0.0, 0.0, 0.0, a, np.zeros(3)))
     hc.on_attitude(AttitudeSample(0.1, 0.1, 0.0, 0.0, -a, np.zeros(3)))
-    got = hc._yaw_at(0.05)
+    got = hc._attitude.yaw_at(0.05)
     assert got is not None
     assert abs(wrap_pi(got[0] - math.pi)) < 1e-12
 
@@ -310,7 +310,7 @@ def test_turn_detected_from_heading_change_when_body_rates_are_zero() -> None:
     for k in range(50):  # 5 deg/s of heading change with zero reported rates
         t = k * 0.04
         hc.on_attitude(AttitudeSample(t, t, 0.0, 0.0, math.radians(5.0 * t), np.zeros(3)))
-    assert any(hc._att_turning[15:])
+    assert any(hc._attitude._turning[15:])
 
 
 def test_position_track_source_is_accurate_and_fast_with_rtk_positions() -> None:
@@ -491,12 +491,13 @@ def test_heavy_tailed_mismatch_fails_normality() -> None:
     hc = HeadingCorrector(no_park_cfg())
     rng = np.random.default_rng(10)
     x = 0.02 + 0.005 * rng.standard_t(2, size=2000)
-    hc._x = list(x)
-    hc._t = list(np.arange(x.size) * 0.1)
-    hc._sig = [0.05] * x.size  # generous: dispersion passes
-    hc._leg = [1] * x.size
+    sample = hc._sample
+    sample.x_rad = list(x)
+    sample.t_s = list(np.arange(x.size) * 0.1)
+    sample.sigma_rad = [0.05] * x.size  # generous: dispersion passes
+    sample.leg = [1] * x.size
     for v in x:
-        hc._stats = hc._stats.update(float(v))
+        sample.stats = sample.stats.update(float(v))
     verdict = hc.judge()
     assert not verdict.ok and verdict.reason.startswith("not_normal")
 
@@ -628,6 +629,11 @@ def test_bad_input_is_counted_not_fatal() -> None:
         ("max_speed_mps", 1.0),
         ("ground_crab_deg", 90.0),
         ("park_window_s", 5.0),
+        ("spread_start_cycle", 1),
+        ("spread_start_cycle", 100),
+        ("min_leg_cycles", 2),
+        ("attitude_buffer_s", 1.0),
+        ("pos_baseline_s", 3.0),
     ],
 )
 def test_config_validation_names_the_field(name: str, value: object) -> None:

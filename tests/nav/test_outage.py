@@ -140,7 +140,16 @@ def test_long_bridge_is_lost():
     assert mon.mode is NavMode.LOST
 
 
-@pytest.mark.parametrize("bad", [{"gnss_timeout_s": 0.0}, {"stale_motion_ratio": 1.5}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"gnss_timeout_s": 0.0},
+        {"stale_motion_ratio": 1.5},
+        {"min_fix_type": 9},
+        {"reacquire_fixes": 0},
+        {"accuracy_jump_ratio": 1.0},
+    ],
+)
 def test_config_validation_names_the_field(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         OutageConfig(**bad)

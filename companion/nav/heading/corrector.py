@@ -1,0 +1,407 @@
+"""The taxi heading correction's state machine: one cycle per GNSS fix.
+
+Each GNSS fix is one cycle of Markelov et al. A cycle counts only when the
+vehicle is on the ground (:mod:`~companion.nav.heading.ground`), the section is
+straight (:mod:`~companion.nav.heading.attitude`), the GNSS ground speed is
+between ``min_speed_mps`` and ``max_speed_mps``, and the fix is at least
+``min_fix_type`` with a velocity accuracy of at most ``max_vel_acc_mps``. Its
+mismatch enters the running statistics (:mod:`~companion.nav.heading.stats`);
+once the sample is sufficient the acceptance criteria
+(:mod:`~companion.nav.heading.criteria`) make it READY or reject it.
+
+Phases (:class:`~companion.nav.heading.state.HeadingPhase`): ACCUMULATING ->
+READY (all criteria hold) -> APPLIED (confirmed, or ``auto_apply``). A failed
+criterion, or a position-track sample losing RTK, starts the accumulation over;
+the ground station's refusal sends READY back to ACCUMULATING.
+
+Pure: no I/O, no clock; time comes from the samples.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from companion.nav.frames import wrap_pi
+from companion.nav.heading.attitude import AttitudeHistory
+from companion.nav.heading.config import HeadingConfig
+from companion.nav.heading.criteria import Verdict, judge_sample
+from companion.nav.heading.ground import GroundState
+from companion.nav.heading.park import ParkCheck
+from companion.nav.heading.state import HeadingPhase, restore_state, to_state
+from companion.nav.heading.stats import CycleSample, HeadingEstimate
+from companion.nav.heading.track import PositionTrack
+from companion.types import (
+    Alert,
+    AlertCode,
+    AttitudeSample,
+    GnssFix,
+    HeadingCommand,
+    NamedValue,
+    Output,
+    Severity,
+    VfrHudSample,
+)
+
+logger = logging.getLogger(__name__)
+
+
+class HeadingCorrector:
+    """Taxi heading correction (Markelov et al.): a pure, stepwise estimator.
+
+    Feed it :meth:`on_attitude` (INS heading and rate), :meth:`on_landed_state`
+    (``on_ground`` from EXTENDED_SYS_STATE, ``None`` when not sent),
+    :meth:`on_vfr_hud` (climb rate for the fallback ground inference) and
+    :meth:`on_gnss` (one cycle per fix). Outputs are returned, never sent.
+
+    Publication: while accumulating, READY or APPLIED, every fix that leaves
+    at least ``publish_period_s`` since the last publication yields
+    ``NamedValue("CMP_HDGC", deg)`` (accumulating: the running mean; READY: the
+    candidate; APPLIED: the applied correction) and ``NamedValue("CMP_HDGE", deg)``
+    (its 95 % accuracy ``eps``), once there are two cycles. Alerts: HDG_READY,
+    HDG_REJECT, HDG_APPLIED (:class:`~companion.types.Alert`).
+
+    References
+    ----------
+    Markelov et al., "INS course correction from satellite navigation before
+    take-off": recursions and acceptance criteria (see :mod:`companion.nav.heading`).
+    """
+
+    def __init__(self, config: HeadingConfig | None = None) -> None:
+        self.config = config if config is not None else HeadingConfig()
+        self._z = self.config.z_score
+        self._crab_rad = math.radians(self.config.ground_crab_deg)
+        self._ins_var_rad2 = math.radians(self.config.ins_yaw_noise_deg) ** 2
+        self.rejections: Counter[str] = Counter()
+        """Cycles or inputs not used, by reason (counted and logged)."""
+        self.reject_alerts = 0
+        # attitude buffer (not persisted: it is seconds long)
+        self._attitude = AttitudeHistory(self.config, self._reject)
+        self._ground = GroundState(self.config)
+        # accumulation
+        self.phase = HeadingPhase.ACCUMULATING
+        self._sample = CycleSample()
+        self._track = PositionTrack(self.config, self._reject)
+        self._park = ParkCheck(self.config)
+        # results
+        self._candidate: HeadingEstimate | None = None
+        self._applied: HeadingEstimate | None = None
+        self._last_publish_t: float | None = None
+        self._last_fix_t: float | None = None
+        self._source: str | None = None
+        """Track source of the current sample ("position" / "velocity"; None: not chosen)."""
+
+    # ------------------------------------------------------------------ inputs
+
+    def on_attitude(self, sample: AttitudeSample) -> None:
+        """Buffer the INS heading ``yaw_rad`` and its rate (turn detection)."""
+        self._attitude.add(sample)
+
+    def on_landed_state(self, on_ground: bool | None) -> None:
+        """The autopilot's landed state (EXTENDED_SYS_STATE); ``None``: not sent, infer it."""
+        self._ground.explicit = on_ground
+
+    def on_vfr_hud(self, sample: VfrHudSample) -> None:
+        """Climb rate for the fallback ground inference."""
+        if math.isfinite(sample.climb_mps):
+            self._ground.climb_mps = sample.climb_mps
+
+    def on_command(self, command: HeadingCommand) -> list[Output]:
+        """The ground station's answer: apply, or refuse (the sample is restarted)."""
+        if command.apply:
+            return self.apply(command.t_s)
+        if self.phase is HeadingPhase.READY:
+            logger.info("heading correction refused by the ground station")
+            self._restart()
+            self.reject_alerts += 1
+            return [Alert(command.t_s, AlertCode.HDG_REJECT, Severity.WARNING, "refused")]
+        self._reject("command_refuse_not_ready")
+        return []
+
+    def apply(self, t_s: float) -> list[Output]:
+        """Apply the READY candidate (confirmation): ``HDG_APPLIED``; else nothing."""
+        if self.phase is not HeadingPhase.READY or self._candidate is None:
+            self._reject("apply_not_ready")
+            return []
+        self._applied = self._candidate
+        self.phase = HeadingPhase.APPLIED
+        text = self._format(self._applied)
+        logger.info("heading correction applied: %s", text)
+        return [Alert(t_s, AlertCode.HDG_APPLIED, Severity.NOTICE, text)]
+
+    def on_gnss(self, fix: GnssFix) -> list[Output]:
+        """One cycle: park check, straight-leg test, recursions, criteria, publication."""
+        out: list[Output] = []
+        if not math.isfinite(fix.t_s):
+            self._reject("fix_time_not_finite")
+            return out
+        if fix.receiver_id != self.config.receiver_id:
+            self._reject("other_receiver")
+            return out
+        if self._last_fix_t is not None and fix.t_s <= self._last_fix_t:
+            if fix.t_s < self._last_fix_t - self.config.attitude_buffer_s:
+                self._last_fix_t = None  # the clock restarted (autopilot reboot)
+            else:
+                # a repeated or late fix (a receiver repeating its last solution) would
+                # enter the sample twice
+                self._reject("fix_not_newer")
+                return out
+        self._last_fix_t = fix.t_s
+        vel = self._fix_velocity(fix)
+        if vel is None:
+            return out
+        vn, ve = vel
+        speed = math.hypot(vn, ve)
+        on_ground = self.on_ground(fix, speed)
+        if not on_ground:
+            self._end_leg()
+            self._park.reset()
+            self._reject("not_on_ground")
+        elif self.phase is HeadingPhase.ACCUMULATING:
+            out.extend(self._park_step(fix, vn, ve, speed))
+            self._cycle(fix, vn, ve, speed)
+            out.extend(self._maybe_judge(fix.t_s))
+        out.extend(self._publish(fix.t_s, on_ground))
+        return out
+
+    # ------------------------------------------------------------------ results
+
+    @property
+    def correction_rad(self) -> float:
+        """The applied correction (rad), 0 until applied. Subtract it from the INS heading."""
+        return self._applied.correction_rad if self._applied is not None else 0.0
+
+    @property
+    def applied(self) -> HeadingEstimate | None:
+        """The applied estimate, ``None`` until applied."""
+        return self._applied
+
+    @property
+    def candidate(self) -> HeadingEstimate | None:
+        """The READY (or applied) estimate, ``None`` before READY."""
+        return self._candidate
+
+    @property
+    def park_ok(self) -> bool | None:
+        """Latest parked check: passed, failed, or ``None`` when not done."""
+        return self._park.ok
+
+    def corrected_yaw_rad(self, yaw_rad: float) -> float:
+        """INS heading minus the applied correction, wrapped to [-pi, pi)."""
+        return wrap_pi(yaw_rad - self.correction_rad)
+
+    def estimate(self) -> HeadingEstimate:
+        """The running estimate of the current accumulation (the recursions of Markelov et al.)."""
+        return self._sample.estimate(self._z)
+
+    def mismatches_rad(self) -> np.ndarray:
+        """Mismatches of the current accumulation (unwrapped about the mean), rad, shape (n,)."""
+        return np.asarray(self._sample.x_rad, dtype=np.float64)
+
+    def cycle_times_s(self) -> np.ndarray:
+        """Times of validity of the cycles of the current accumulation, s, shape (n,)."""
+        return np.asarray(self._sample.t_s, dtype=np.float64)
+
+    def running_mean_spread_rad(self) -> float:
+        """Spread (1 sigma) of the running mean since ``spread_start_cycle``, rad."""
+        return self._sample.mean_spread_rad()
+
+    def on_ground(self, fix: GnssFix, speed_mps: float) -> bool:
+        """On the ground? The autopilot's landed state when sent, else inferred
+        (:mod:`companion.nav.heading.ground`)."""
+        return self._ground.on_ground(fix, speed_mps)
+
+    def park_verdict(self, vel_ne_mps: np.ndarray) -> Verdict:
+        """Parked check: is the mean GNSS velocity (shape (n, 2), m/s) a bias?
+        (:func:`~companion.nav.heading.criteria.park_bias_verdict`)."""
+        return self._park.verdict(vel_ne_mps)
+
+    def judge(self) -> Verdict:
+        """Evaluate the acceptance criteria on the current accumulation.
+
+        Order (the first failure is the reason): sufficiency, park check,
+        running-mean spread, dispersion, normality, trend, leg consistency
+        (:func:`~companion.nav.heading.criteria.judge_sample`).
+        """
+        est = self.estimate()
+        return judge_sample(
+            self._sample, est.eps_rad, self._min_cycles(), self._park.ok, self.config
+        )
+
+    # ------------------------------------------------------------------ internals
+
+    def _reject(self, reason: str) -> None:
+        self.rejections[reason] += 1
+        n = self.rejections[reason]
+        if n & (n - 1) == 0:  # log the 1st, 2nd, 4th, 8th ... occurrence
+            logger.debug("heading cycle not used: %s (x%d)", reason, n)
+
+    def _fix_velocity(self, fix: GnssFix) -> tuple[float, float] | None:
+        if fix.fix_type < self.config.min_fix_type:
+            self._reject("fix_type")
+            return None
+        if fix.vel_ne_mps is None:
+            self._reject("no_velocity")
+            return None
+        vel = np.asarray(fix.vel_ne_mps, dtype=np.float64)
+        if vel.shape != (2,) or not np.all(np.isfinite(vel)):
+            self._reject("velocity_invalid")
+            return None
+        if fix.vel_acc_mps is not None and not (
+            math.isfinite(fix.vel_acc_mps) and fix.vel_acc_mps <= self.config.max_vel_acc_mps
+        ):
+            self._reject("vel_acc")
+            return None
+        return float(vel[0]), float(vel[1])
+
+    def _vel_sigma(self, fix: GnssFix) -> float:
+        if fix.vel_acc_mps is None:
+            return self.config.default_vel_acc_mps
+        return max(fix.vel_acc_mps, self.config.vel_acc_floor_mps)
+
+    def _cycle(self, fix: GnssFix, vn: float, ve: float, speed: float) -> None:
+        cfg = self.config
+        if speed < cfg.min_speed_mps:
+            self._end_leg()
+            self._reject("slow")
+            return
+        got = self._attitude.yaw_at(fix.t_s)
+        if got is None:
+            self._end_leg()
+            return
+        yaw, straight = got
+        if not straight:
+            self._end_leg()
+            self._reject("turn")
+            return
+        if len(self._sample.x_rad) >= cfg.max_cycles:
+            self._reject("max_cycles")
+            return
+        if self._source_for(fix) == "position":
+            got_pos = self._track.track(fix)
+            if got_pos is None:
+                return
+            track, sig_track2, t_mid = got_pos
+            got_mid = self._attitude.yaw_at(t_mid)
+            if got_mid is None:
+                return
+            yaw = got_mid[0]
+            t_cycle = t_mid
+        else:
+            track = math.atan2(ve, vn)
+            sig_track2 = (self._vel_sigma(fix) / speed) ** 2
+            t_cycle = fix.t_s
+        self._sample.add(
+            t_cycle,
+            wrap_pi(yaw - track - self._crab_rad),
+            math.sqrt(sig_track2 + self._ins_var_rad2),
+            spread_start=self._spread_start(),
+            min_leg_cycles=cfg.min_leg_cycles,
+        )
+
+    def _source_for(self, fix: GnssFix) -> str:
+        """The track source of this sample (fixed at its first cycle in ``auto``)."""
+        cfg = self.config
+        if cfg.track_source != "auto":
+            return cfg.track_source
+        want = "position" if fix.fix_type >= cfg.pos_min_fix_type else "velocity"
+        if self._source is None:
+            self._source = want
+        elif self._source == "position" and want == "velocity":
+            # RTK lost mid-sample: start over on the Doppler track rather than mix
+            self._reject("track_source_changed")
+            self._restart()
+            self._source = want
+        return self._source
+
+    def _min_cycles(self) -> int:
+        pos = self._source == "position" or self.config.track_source == "position"
+        return self.config.pos_min_cycles if pos else self.config.min_cycles
+
+    def _spread_start(self) -> int:
+        pos = self._source == "position" or self.config.track_source == "position"
+        return self.config.pos_spread_start_cycle if pos else self.config.spread_start_cycle
+
+    def _end_leg(self) -> None:
+        self._sample.end_leg()
+        self._track.reset()
+
+    def _restart(self) -> None:
+        self.phase = HeadingPhase.ACCUMULATING
+        self._sample.clear()
+        self._track.reset()
+        self._candidate = None
+        self._source = None
+
+    def _park_step(self, fix: GnssFix, vn: float, ve: float, speed: float) -> list[Output]:
+        reason = self._park.step(fix, vn, ve, speed, self._ground)
+        if reason is None:
+            return []
+        self.reject_alerts += 1
+        return [Alert(fix.t_s, AlertCode.HDG_REJECT, Severity.WARNING, reason)]
+
+    def _maybe_judge(self, t_s: float) -> list[Output]:
+        cfg = self.config
+        est = self.estimate()
+        if est.n < self._min_cycles() or self._sample.full_legs < cfg.min_legs:
+            return []
+        if math.degrees(est.eps_rad) > cfg.eps_limit_deg and est.n < cfg.max_cycles:
+            return []
+        verdict = self.judge()
+        if not verdict.ok:
+            logger.warning("heading correction rejected: %s %s", verdict.reason, verdict.details)
+            self._restart()
+            self.reject_alerts += 1
+            return [Alert(t_s, AlertCode.HDG_REJECT, Severity.WARNING, verdict.reason)]
+        self._candidate = est
+        self.phase = HeadingPhase.READY
+        text = self._format(est)
+        logger.info("heading correction ready: %s (%s)", text, verdict.details)
+        out: list[Output] = [Alert(t_s, AlertCode.HDG_READY, Severity.NOTICE, text)]
+        if cfg.auto_apply:
+            out.extend(self.apply(t_s))
+        return out
+
+    # publication -------------------------------------------------------------
+
+    def _format(self, est: HeadingEstimate) -> str:
+        return f"{math.degrees(est.correction_rad):.2f} ±{math.degrees(est.eps_rad):.2f} n={est.n}"
+
+    def _publish(self, t_s: float, on_ground: bool) -> list[Output]:
+        if self.phase is HeadingPhase.APPLIED:
+            est = self._applied
+        elif self.phase is HeadingPhase.READY:
+            est = self._candidate
+        else:
+            est = self.estimate()
+        if est is None or est.n < 2 or (self.phase is HeadingPhase.ACCUMULATING and not on_ground):
+            return []
+        if (
+            self._last_publish_t is not None
+            and t_s - self._last_publish_t < self.config.publish_period_s
+            and t_s >= self._last_publish_t
+        ):
+            return []
+        self._last_publish_t = t_s
+        return [
+            NamedValue(t_s, "CMP_HDGC", math.degrees(est.correction_rad)),
+            NamedValue(t_s, "CMP_HDGE", math.degrees(est.eps_rad)),
+        ]
+
+    # persistence -------------------------------------------------------------
+
+    def to_state(self) -> dict[str, Any]:
+        """Plain, JSON-compatible dictionary of everything that must survive a restart
+        (:func:`companion.nav.heading.state.to_state`)."""
+        return to_state(self)
+
+    @classmethod
+    def from_state(cls, config: HeadingConfig, state: dict[str, Any]) -> HeadingCorrector:
+        """Rebuild a corrector from :meth:`to_state` output (ValueError when malformed)."""
+        obj = cls(config)
+        restore_state(obj, state)
+        return obj
