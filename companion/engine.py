@@ -37,7 +37,7 @@ from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
-from companion.nav.frames import LocalFrame, wrap_2pi
+from companion.nav.frames import LocalFrame
 from companion.nav.gnss import gnss_measurement
 from companion.nav.heading import HeadingConfig, HeadingCorrector
 from companion.nav.motion import SingerConfig, SingerNavigator
@@ -55,6 +55,7 @@ from companion.nav.potential import (
     PotentialPrediction,
     combine_with_ins,
 )
+from companion.nav.rotations import wrap_2pi
 from companion.types import (
     Alert,
     AlertCode,

@@ -102,7 +102,7 @@ import numpy as np
 import numpy.typing as npt
 
 from companion.nav import ins
-from companion.nav.frames import LocalFrame, quat_to_euler, skew, wrap_pi
+from companion.nav.frames import LocalFrame
 from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
 from companion.nav.grades import IMU_GRADES
 from companion.nav.kalman import (
@@ -115,13 +115,25 @@ from companion.nav.kalman import (
     van_loan,
 )
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.rotations import (
+    Mat3Values,
+    Quat,
+    Vec3,
+    euler_to_quat_values,
+    mat_to_quat,
+    quat_from_rotvec,
+    quat_mul,
+    quat_normalise,
+    quat_to_mat,
+    quat_to_mat_values,
+    quat_to_yaw,
+    rotate_by_rotvec,
+    skew,
+    wrap_pi,
+)
 from companion.types import AttitudeSample, FixType, FloatArray, ImuSample
 
 log = logging.getLogger(__name__)
-
-Vec3 = tuple[float, float, float]
-Mat3Values = tuple[float, float, float, float, float, float, float, float, float]
-"""A 3x3 matrix as 9 floats, row-major (:func:`companion.nav.ins.quat_to_mat_values`)."""
 
 _DEG = math.pi / 180.0
 _HOUR_S = 3600.0
@@ -291,7 +303,7 @@ class _Snapshot:
     """Nominal position (3 floats, NED, m)."""
     vel: tuple[float, ...]
     """Nominal velocity (3 floats, NED, m/s)."""
-    q_nb: ins.Quat
+    q_nb: Quat
     p_mat: FloatArray
     phi: FloatArray | None = None
     qd: FloatArray | None = None
@@ -384,9 +396,9 @@ class BlendNavigator:
         self._gb_fix: FixType | None = None
         self._gb_tau = 300.0
         self._hist: deque[_Snapshot] = deque()
-        self._att_q: ins.Quat | None = None
+        self._att_q: Quat | None = None
         self._att_t_s = math.nan
-        self._att_corr: ins.Quat = (1.0, 0.0, 0.0, 0.0)
+        self._att_corr: Quat = (1.0, 0.0, 0.0, 0.0)
         self._last_fuse_t_s = math.nan
         self._r_win = InnovationWindow(3, self.config.adaptive_window)
         self._q_win = InnovationWindow(3, self.config.adaptive_window)
@@ -442,25 +454,25 @@ class BlendNavigator:
             return
         mech = self._mech
         if self._strapdown:
-            target_yaw = quat_to_euler(np.array(self._att_q))[2]
-            yaw = quat_to_euler(np.array(mech.q_nb))[2]
+            target_yaw = quat_to_yaw(*self._att_q)
+            yaw = quat_to_yaw(*mech.q_nb)
             turn = wrap_pi(target_yaw - yaw)
         else:
             w, x, y, z = self._att_corr
             sign = 1.0 if w >= 0.0 else -1.0
             # the correction's rotation about down (small-angle rotation vector)
             turn = -2.0 * sign * z
-            self._att_corr = ins.quat_normalise(
-                ins.quat_mul(ins.quat_from_rotvec(0.0, 0.0, turn), self._att_corr)
+            self._att_corr = quat_normalise(
+                quat_mul(quat_from_rotvec(0.0, 0.0, turn), self._att_corr)
             )
-        mech.q_nb = ins.rotate_by_rotvec(mech.q_nb, 0.0, 0.0, turn)
+        mech.q_nb = rotate_by_rotvec(mech.q_nb, 0.0, 0.0, turn)
         k = ins.IA + 2
         p = self._p
         p[k, :] = 0.0
         p[:, k] = 0.0
         p[k, k] = yaw_sigma_rad**2
         for snap in self._hist:
-            snap.q_nb = ins.rotate_by_rotvec(snap.q_nb, 0.0, 0.0, turn)
+            snap.q_nb = rotate_by_rotvec(snap.q_nb, 0.0, 0.0, turn)
         log.info("heading restarted from the taxi correction: turned %.3f deg", math.degrees(turn))
 
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
@@ -477,11 +489,11 @@ class BlendNavigator:
         ):
             self._reject("attitude_not_finite")
             return
-        self._att_q = _euler_to_quat(roll, pitch, yaw - yaw_correction_rad)
+        self._att_q = euler_to_quat_values(roll, pitch, yaw - yaw_correction_rad)
         self._att_t_s = sample.t_s
         if self._init and not self._strapdown:
             mech = self._mech
-            q_used = ins.quat_mul(self._att_corr, self._att_q)
+            q_used = quat_mul(self._att_corr, self._att_q)
             mech.q_nb = mech.carry_attitude(q_used, mech.t_s - sample.t_s)
 
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
@@ -567,7 +579,7 @@ class BlendNavigator:
         dt_p = max(0.0, t_s - self._hist[-1].t_s)
         cov = _open_segment_cov(self._p[0:6, 0:6].tolist(), self.diag.accel_psd_ned.tolist(), dt_p)
         w, x, y, z = mech.q_nb
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        yaw = quat_to_yaw(w, x, y, z)
         vn, ve, vd = mech.vel
         pn, pe, pd = mech.pos
         if dt > 0.0:
@@ -599,14 +611,14 @@ class BlendNavigator:
         lat, lon, alt = old.ned_to_lla(np.array(mech.pos))
         mech.pos = [float(c) for c in new.lla_to_ned(lat, lon, alt)]
         mech.vel = [float(c) for c in rot @ np.array(mech.vel)]
-        q_rot = _mat_to_quat(rot)
-        mech.q_nb = ins.quat_normalise(ins.quat_mul(q_rot, mech.q_nb))
+        q_rot = mat_to_quat(rot)
+        mech.q_nb = quat_normalise(quat_mul(q_rot, mech.q_nb))
         t = np.eye(N_STATE)
         self._gb = (rot @ np.array(self._gb)).tolist()
         for k in (ins.IP, ins.IV, ins.IA, IGB):
             t[k : k + 3, k : k + 3] = rot
         self._p = t @ self._p @ t.T
-        self._att_corr = ins.quat_normalise(ins.quat_mul(q_rot, self._att_corr))
+        self._att_corr = quat_normalise(quat_mul(q_rot, self._att_corr))
         self._hist = deque(
             [_Snapshot(mech.t_s, tuple(mech.pos), tuple(mech.vel), mech.q_nb, self._p)]
         )
@@ -699,7 +711,7 @@ class BlendNavigator:
         mech = self._mech
         dt, f_ned = mech.take_segment_values()
         snap = self._hist[-1]
-        mat_nb = ins.quat_to_mat_values(mech.q_nb)
+        mat_nb = quat_to_mat_values(mech.q_nb)
         f_mat = self._f_filled(f_ned, mat_nb)
         if self._van_loan:
             phi, qd = van_loan(f_mat, np.diag(self._gqg), dt)
@@ -712,7 +724,7 @@ class BlendNavigator:
         while len(self._hist) > 2 and self._hist[1].t_s <= horizon:
             self._hist.popleft()
 
-    def _state_at(self, t_s: float) -> tuple[int, list[float], list[float], ins.Quat]:
+    def _state_at(self, t_s: float) -> tuple[int, list[float], list[float], Quat]:
         """Nominal position, velocity (3 floats each) and attitude interpolated at ``t_s``, and
         the index of the snapshot nearest in time (whose covariance the fix is fused with)."""
         hist = self._hist
@@ -751,7 +763,7 @@ class BlendNavigator:
             return j + 1, pos, vel, s1_q
         return j, pos, vel, (s0.q_nb if u < 0.5 else s1_q)
 
-    def _extrapolated(self, t_s: float) -> tuple[list[float], list[float], ins.Quat]:
+    def _extrapolated(self, t_s: float) -> tuple[list[float], list[float], Quat]:
         """The state carried past the newest IMU sample to ``t_s``, for a fix ahead of it
         (the IMU stream lags or has just stopped), with the mean acceleration of the
         newest ~0.1 s of the history: at 60 m/s in a 3 m/s^2 turn, a 0.08 s lead left
@@ -829,7 +841,7 @@ class BlendNavigator:
         z_pos: list[float],
         pos: list[float],
         vel: list[float],
-        q_nb: ins.Quat,
+        q_nb: Quat,
         r_pos: list[float],
         r_vel: list[float],
     ) -> tuple[tuple[int, ...], list[float], FloatArray, list[float]]:
@@ -853,7 +865,7 @@ class BlendNavigator:
         pos_ant: Sequence[float] = pos
         vel_ant: Sequence[float] = vel
         if self._has_lever:
-            mat_nb = ins.quat_to_mat(q_nb)
+            mat_nb = quat_to_mat(q_nb)
             lever_n = mat_nb @ self._lever
             pos_ant = (np.array(pos) + lever_n).tolist()
             h_mat = h_mat.copy()
@@ -983,14 +995,14 @@ class BlendNavigator:
             if dt_open > 0.0:
                 sm = mech.seg_fn_sum
                 f_ned = (sm[0] / dt_open, sm[1] / dt_open, sm[2] / dt_open)
-                f_dx = self._f_filled(f_ned, ins.quat_to_mat_values(mech.q_nb)).dot(dx)
+                f_dx = self._f_filled(f_ned, quat_to_mat_values(mech.q_nb)).dot(dx)
                 f_dx *= dt_open
                 dx = dx + f_dx
             d = dx.tolist()
         self._p = p
         mech.inject_values(d)
         if not self._strapdown:
-            self._att_corr = ins.rotate_by_rotvec(self._att_corr, d[6], d[7], d[8])
+            self._att_corr = rotate_by_rotvec(self._att_corr, d[6], d[7], d[8])
         if self._gm:
             gb = self._gb
             self._gb = [gb[0] - d[IGB], gb[1] - d[IGB + 1], gb[2] - d[IGB + 2]]
@@ -1015,7 +1027,7 @@ class BlendNavigator:
         before = [x for x in pre if x[0] <= t0]
         mech.set_raw(before[-1][1], before[-1][2])
         q0 = mech.carry_attitude(self._att_q, t0 - self._att_t_s)
-        mat_nb = ins.quat_to_mat(q0)
+        mat_nb = quat_to_mat(q0)
         vel = np.asarray(meas.vel_ned_mps, dtype=float)
         vel_ok = np.isfinite(vel)
         vel0 = np.where(vel_ok, vel, 0.0)
@@ -1057,19 +1069,6 @@ class BlendNavigator:
         return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")
 
 
-def _euler_to_quat(roll_rad: float, pitch_rad: float, yaw_rad: float) -> ins.Quat:
-    """:func:`companion.nav.frames.euler_to_quat` as a tuple of floats (the same formula)."""
-    cr, sr = math.cos(roll_rad / 2), math.sin(roll_rad / 2)
-    cp, sp = math.cos(pitch_rad / 2), math.sin(pitch_rad / 2)
-    cy, sy = math.cos(yaw_rad / 2), math.sin(yaw_rad / 2)
-    return (
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    )
-
-
 def _gm_psd(sigma: float, tau_s: float) -> float:
     """White-noise PSD driving a first-order Gauss-Markov process of steady-state ``sigma``.
 
@@ -1085,31 +1084,7 @@ def _inject_snapshot(snap: _Snapshot, d: list[float]) -> None:
     p, v = snap.pos, snap.vel
     snap.pos = (p[0] - d[0], p[1] - d[1], p[2] - d[2])
     snap.vel = (v[0] - d[3], v[1] - d[4], v[2] - d[5])
-    snap.q_nb = ins.rotate_by_rotvec(snap.q_nb, d[6], d[7], d[8])
-
-
-def _mat_to_quat(mat: FloatArray) -> ins.Quat:
-    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method, w >= 0 branch)."""
-    tr = float(np.trace(mat))
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        return ins.quat_normalise(
-            (
-                0.25 * s,
-                (mat[2, 1] - mat[1, 2]) / s,
-                (mat[0, 2] - mat[2, 0]) / s,
-                (mat[1, 0] - mat[0, 1]) / s,
-            )
-        )
-    i = int(np.argmax(np.diag(mat)))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = math.sqrt(1.0 + mat[i, i] - mat[j, j] - mat[k, k]) * 2.0
-    q = [0.0, 0.0, 0.0, 0.0]
-    q[0] = (mat[k, j] - mat[j, k]) / s
-    q[1 + i] = 0.25 * s
-    q[1 + j] = (mat[j, i] + mat[i, j]) / s
-    q[1 + k] = (mat[k, i] + mat[i, k]) / s
-    return ins.quat_normalise((q[0], q[1], q[2], q[3]))
+    snap.q_nb = rotate_by_rotvec(snap.q_nb, d[6], d[7], d[8])
 
 
 def _block(row: int, col: int) -> list[tuple[int, int]]:

@@ -103,7 +103,7 @@ import numpy as np
 from scipy import stats
 
 from companion.nav.earth import radii_of_curvature_m
-from companion.nav.frames import wrap_pi
+from companion.nav.rotations import wrap_pi
 from companion.types import (
     Alert,
     AlertCode,

@@ -11,8 +11,9 @@ import pytest
 from scipy.stats import chi2
 
 from companion.nav.blend import BlendConfig, BlendNavigator
-from companion.nav.frames import LocalFrame, euler_to_mat_nb
+from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement
+from companion.nav.rotations import euler_to_mat_nb
 from companion.types import AttitudeSample, FixType, ImuSample
 from tests.nav.test_ins import ALT0, LAT0, Turn
 
