@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from companion.nav import ins
-from companion.nav.blend import _carry_pos_vel
+from companion.nav.blend.error_model import carry_pos_vel, open_segment_cov
 from companion.nav.rotations import Quat, quat_from_rotvec, quat_mul, quat_normalise
 
 
@@ -24,7 +24,7 @@ def test_carry_pos_vel_equals_the_transition_form() -> None:
         q[0:3, 3:6] = q[3:6, 0:3] = np.diag(psd) * dt**2 / 2.0
         q[3:6, 3:6] = np.diag(psd) * dt
         want = phi @ p @ phi.T + q
-        got = _carry_pos_vel(p, dt, psd)
+        got = carry_pos_vel(p, dt, psd)
         np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
 
 
@@ -65,7 +65,6 @@ def test_carry_attitude_equals_the_composed_quaternion_form() -> None:
 
 
 def test_open_segment_covariance_equals_the_array_form() -> None:
-    from companion.nav.blend import _open_segment_cov
 
     rng = np.random.default_rng(13)
     for _ in range(100):
@@ -77,6 +76,6 @@ def test_open_segment_covariance_equals_the_array_form() -> None:
         p_pos += np.diag(psd * dt**3 / 3.0)
         p_pos = 0.5 * (p_pos + p_pos.T)
         p_vel = b[3:6, 3:6] + np.diag(psd * dt)
-        got = np.array(_open_segment_cov(b.tolist(), psd.tolist(), dt))
+        got = np.array(open_segment_cov(b.tolist(), psd.tolist(), dt))
         np.testing.assert_allclose(got[:9].reshape(3, 3), p_pos, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(got[9:].reshape(3, 3), p_vel, rtol=1e-14, atol=1e-15)
