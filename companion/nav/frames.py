@@ -3,7 +3,7 @@
 Rotations (quaternions, matrices, Euler angles) are in :mod:`companion.nav.rotations`.
 
 The local NED frame is anchored at a geodetic point; its conversions are exact
-closed forms through ECEF (tested against pymap3d, which is ~40x slower per point).
+closed forms through ECEF (tested against pymap3d, which costs far more per point).
 Heights are whatever datum the caller uses consistently (the core uses MSL
 heights; within a local frame the geoid undulation is a constant offset of
 centimetres to metres that drops out of every difference).

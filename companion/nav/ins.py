@@ -1,9 +1,10 @@
 """INS mechanisation in the local NED frame, and its error model.
 
-The nominal state is kept in plain Python floats (the per-sample path must
-cost microseconds): body-to-NED quaternion ``q_nb`` (w, x, y, z), velocity
-``vel_ned_mps``, position ``pos_ned_m`` in the engine's local NED frame, and
-the accelerometer and gyro bias estimates ``ba_b_mps2``, ``bg_b_radps``.
+The nominal state (:class:`Mechanisation`) is kept in plain Python floats (the
+per-sample path must cost microseconds): body-to-NED quaternion ``q_nb`` (w, x, y, z),
+velocity ``vel`` (NED, m/s) and position ``pos`` (m) in the engine's local NED frame,
+and the accelerometer and gyro bias estimates ``ba`` (body, m/s^2) and ``bg`` (body,
+rad/s). Quaternion and matrix helpers: :mod:`companion.nav.rotations`.
 
 Two ways of keeping attitude:
 
@@ -13,9 +14,9 @@ Two ways of keeping attitude:
   and the gyros only carry it to the IMU times between attitude samples.
 
 In both modes the measured specific force, rotated by the attitude and with
-WGS-84 normal gravity added, drives velocity and position (the S2 motion
-model: the aircraft's own specific force, not a stationary-acceleration
-guess).
+WGS-84 normal gravity added, drives velocity and position (the motion model is
+the aircraft's own specific force, not a stationary-acceleration guess: "Tracking
+with the aircraft's kinematic and dynamic parameters").
 
 The local frame is treated as an inertial, flat frame with the vertical of
 its anchor (Earth rate, transport rate and the tilt of the local vertical
@@ -30,7 +31,9 @@ References
 ----------
 Titterton & Weston, Strapdown Inertial Navigation Technology, 2nd ed., ch. 3
 (quaternion attitude update) and ch. 12 (psi-angle error equations, 12.20-12.22);
-SEEDS.md S1 (INS filter states), S2 (specific force as the motion model).
+El-Mowafy (2005), RTK networks for precision approach with an adaptive GPS/INS blend
+(the INS filter states); "Tracking with the aircraft's kinematic and dynamic
+parameters" (specific force as the motion model).
 """
 
 from __future__ import annotations
@@ -308,7 +311,7 @@ def error_model_f(
 
     References
     ----------
-    Titterton & Weston, eq. 12.20-12.22 (flat, non-rotating frame); SEEDS.md S1
+    Titterton & Weston, eq. 12.20-12.22 (flat, non-rotating frame); El-Mowafy (2005)
     (first-order Gauss-Markov sensor errors).
     """
     f = np.zeros((N_ERR, N_ERR))

@@ -453,10 +453,17 @@ def test_unknown_accuracy_uses_fallback_by_fix_type() -> None:
 def test_config_validation_names_the_field() -> None:
     with pytest.raises(ValueError, match="mode"):
         BlendConfig(mode="magic")
-    with pytest.raises(ValueError, match="cov_interval_s"):
+    with pytest.raises(ValueError, match="cov_interval_s must be > 0, got 0.0"):
         BlendConfig(cov_interval_s=0.0)
     with pytest.raises(ValueError, match="r_scale_bounds"):
         BlendConfig(r_scale_bounds=(2.0, 3.0))
+    with pytest.raises(ValueError, match="att_err_sigma_rad"):
+        BlendConfig(att_err_sigma_rad=(0.001, 0.001))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="adaptive_min_epochs"):
+        BlendConfig(adaptive_window=5, adaptive_min_epochs=6)
+    with pytest.raises(ValueError, match="history_s"):
+        BlendConfig(history_s=0.15)
+    assert BlendConfig(accel_bias_tau_s=math.inf).accel_bias_tau_s == math.inf
     with pytest.raises(ValueError, match="grade"):
         BlendConfig.for_grade("navigation")
     assert (
