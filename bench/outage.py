@@ -1,6 +1,7 @@
-"""Position error through GNSS outages: the blend against the baselines, beside the
-figures of El-Mowafy (2005), "RTK networks for precision approach with an adaptive
-GPS/INS blend".
+"""Position error through GNSS outages: the blend against the baselines and El-Mowafy's figures.
+
+The published figures are those of El-Mowafy (2005), "RTK networks for precision
+approach with an adaptive GPS/INS blend".
 
 For each IMU grade (tactical, MEMS), flight (3 deg approach, cruise with
 coordinated turns), outage length (10, 20, 40, 60 s) and seed, one flight is
