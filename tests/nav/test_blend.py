@@ -13,7 +13,7 @@ from scipy.stats import chi2
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement
-from companion.nav.rotations import euler_to_mat_nb
+from companion.nav.rotations import euler_to_mat_nb, skew
 from companion.types import AttitudeSample, FixType, ImuSample
 from tests.nav.test_ins import ALT0, LAT0, Turn
 
@@ -69,7 +69,7 @@ def simulate(spec: SimSpec, seed: int) -> SimRun:
         roll, pitch, yaw = traj.euler(t)
         # the attitude error is a small rotation in NED: C_ap = (I - [e x]) C
         mat = euler_to_mat_nb(roll, pitch, yaw)
-        c_ap = (np.eye(3) - _skew(att_err)) @ mat
+        c_ap = (np.eye(3) - skew(att_err)) @ mat
         r_ap = math.atan2(c_ap[2, 1], c_ap[2, 2])
         p_ap = -math.asin(c_ap[2, 0])
         y_ap = math.atan2(c_ap[1, 0], c_ap[0, 0])
@@ -96,10 +96,6 @@ def simulate(spec: SimSpec, seed: int) -> SimRun:
         events.append((t_rx, 2, meas))
     events.sort(key=lambda e: (e[0], e[1]))
     return SimRun([e[2] for e in events], spec)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def config_for(spec: SimSpec, **overrides: object) -> BlendConfig:
