@@ -48,9 +48,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.nav.frames import wrap_pi  # noqa: E402
 from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE  # noqa: E402
 from companion.nav.heading import HeadingConfig, HeadingCorrector  # noqa: E402
+from companion.nav.rotations import wrap_pi  # noqa: E402
 from companion.sim import SimFlight, make_scenario, simulate  # noqa: E402
 from companion.types import (  # noqa: E402
     Alert,

@@ -1,4 +1,7 @@
-"""Position error through GNSS outages: the blend against the baselines, beside S1's figures.
+"""Position error through GNSS outages: the blend against the baselines and El-Mowafy's figures.
+
+The published figures are those of El-Mowafy (2005), "RTK networks for precision
+approach with an adaptive GPS/INS blend".
 
 For each IMU grade (tactical, MEMS), flight (3 deg approach, cruise with
 coordinated turns), outage length (10, 20, 40, 60 s) and seed, one flight is
@@ -11,13 +14,14 @@ Navigators (one run):
   blend-adapt-sd   adaptive blend, strapdown mechanisation
   blend-adapt-aa   adaptive blend, attitude-aided (autopilot ATTITUDE)
   blend-fixed-sd   non-adaptive blend, strapdown
-  singer           Singer model without IMU (S2 baseline)
+  singer           Singer model without IMU (the baseline of "Tracking with the
+                   aircraft's kinematic and dynamic parameters")
   cv               constant-velocity extrapolation (PassthroughNavigator)
-  hold             holding the last fix (S0's failure mode)
+  hold             holding the last fix (the failure mode of Grzegorzewski 2005)
 
 Per cell: mean and max over seeds of the mean and max 2-D and height error
 in the gap, and the time CAT III / CAT II were held (the first instant the
-error exceeds the 95 % accuracy limit of S1's table; the gap length if never),
+error exceeds the 95 % accuracy limit of El-Mowafy's table; the gap length if never),
 mean and minimum over seeds. Also: microseconds per IMU sample and per fix of
 the blend, against bare pymavlink parsing of the same flight's messages,
 measured in the same run.
@@ -51,7 +55,7 @@ from companion.nav.passthrough import PassthroughNavigator
 from companion.sim import SimFlight, make_scenario, simulate
 from companion.types import AttitudeSample, FloatArray, GnssFix, ImuSample
 
-S1_TABLE = {
+EL_MOWAFY_2005_TABLE = {
     # outage s: (heli 2-D avg/max, heli H avg/max, plane 2-D avg/max, plane H avg/max), m
     20: ((2.64, 3.73), (0.35, 0.58), (2.14, 3.97), (0.31, 0.53)),
     40: ((4.16, 5.10), (0.92, 1.66), (3.65, 4.84), (0.83, 1.39)),
@@ -59,7 +63,8 @@ S1_TABLE = {
 
 
 class HoldLastFix:
-    """The receiver that keeps repeating its last fix (S0's failure): position frozen."""
+    """The receiver that keeps repeating its last fix (Grzegorzewski 2005's failure case):
+    position frozen."""
 
     def __init__(self) -> None:
         self._last: GnssMeasurement | None = None
@@ -312,7 +317,7 @@ def print_tables(
     names = list(navigators("tactical", LocalFrame(0.0, 0.0, 0.0)))
     print(f"# GNSS outage bench: {args.seeds} seeds per cell, RTK fixed before the gap")
     print("# errors in m: mean over seeds of the per-run mean / max over seeds of the per-run max;")
-    print("# CAT held: mean / min over seeds, s (S1 95 % limits: CAT III 4.1 m H / 0.6 m V,")
+    print("# CAT held: mean / min over seeds, s (El-Mowafy 95 % limits: CAT III 4.1 m H / 0.6 m V,")
     print("# CAT II 5.2 / 1.7); ratio = error / the same cell's cv (constant-velocity) error")
     for grade in args.grades:
         for kind in args.flights:
@@ -341,12 +346,12 @@ def print_tables(
                         f"{m2 / cv_mean:7.3g}"
                     )
     print()
-    print("## S1 (El-Mowafy 2005), tactical INS only, avg / max, m")
+    print("## El-Mowafy (2005), tactical INS only, avg / max, m")
     print(f"{'gap s':>5} {'heli 2-D':>12} {'heli H':>12} {'plane 2-D':>12} {'plane H':>12}")
-    for gap, row in S1_TABLE.items():
+    for gap, row in EL_MOWAFY_2005_TABLE.items():
         cols = " ".join(f"{a:5.2f}/{b:5.2f}" for a, b in row)
         print(f"{gap:5d} {cols}")
-    print("S1: CAT III held 25-31 s, CAT II up to 43 s.")
+    print("El-Mowafy (2005): CAT III held 25-31 s, CAT II up to 43 s.")
     print(
         "Targets (tactical): 20 s <= 1.0 m 2-D, <= 0.2 m H; 40 s <= 2.0 m, <= 0.5 m; "
         "CAT III >= 40 s."

@@ -20,10 +20,11 @@ from dataclasses import replace
 
 from companion.engine.bridge import PotentialBridge
 from companion.integrity.monitor import IntegrityMonitor
-from companion.nav.frames import LocalFrame, wrap_2pi
+from companion.nav.frames import LocalFrame
 from companion.nav.heading import HeadingCorrector
 from companion.nav.navigator import NavState
 from companion.nav.outage import OutageMonitor
+from companion.nav.rotations import wrap_2pi
 from companion.types import (
     FixType,
     GnssFix,

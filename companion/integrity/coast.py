@@ -256,7 +256,7 @@ class InertialCoast:
             self.stats["bad_attitude"] += 1
             log.warning("inertial coast: non-finite attitude at t=%s rejected", sample.t_s)
             return
-        # body-to-NED matrix of the ZYX Euler angles (as companion.nav.frames.euler_to_mat_nb),
+        # body-to-NED matrix of the ZYX Euler angles (as companion.nav.rotations.euler_to_mat_nb),
         # in floats: this runs at the attitude rate
         cr, sr = math.cos(sample.roll_rad), math.sin(sample.roll_rad)
         cp, sp = math.cos(sample.pitch_rad), math.sin(sample.pitch_rad)

@@ -106,7 +106,7 @@ from typing import Any
 import numpy as np
 
 from companion.mavlink import units
-from companion.nav.frames import quat_to_euler
+from companion.nav.rotations import quat_to_euler
 from companion.types import (
     AttitudeSample,
     AutopilotFlavour,

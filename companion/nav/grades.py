@@ -34,7 +34,7 @@ class ImuGrade:
 
 
 IMU_GRADES: dict[str, ImuGrade] = {
-    # S1's tactical grade: gyro drift 1-10 deg/h; accelerometer bias 0.1-1 mG.
+    # El-Mowafy (2005)'s tactical grade: gyro drift 1-10 deg/h; accelerometer bias 0.1-1 mG.
     "tactical": ImuGrade(
         "tactical",
         gyro_bias_sigma_radps=3.0 * _DEG_PER_H,

@@ -1,9 +1,10 @@
 """INS mechanisation in the local NED frame, and its error model.
 
-The nominal state is kept in plain Python floats (the per-sample path must
-cost microseconds): body-to-NED quaternion ``q_nb`` (w, x, y, z), velocity
-``vel_ned_mps``, position ``pos_ned_m`` in the engine's local NED frame, and
-the accelerometer and gyro bias estimates ``ba_b_mps2``, ``bg_b_radps``.
+The nominal state (:class:`Mechanisation`) is kept in plain Python floats (the
+per-sample path must cost microseconds): body-to-NED quaternion ``q_nb`` (w, x, y, z),
+velocity ``vel`` (NED, m/s) and position ``pos`` (m) in the engine's local NED frame,
+and the accelerometer and gyro bias estimates ``ba`` (body, m/s^2) and ``bg`` (body,
+rad/s). Quaternion and matrix helpers: :mod:`companion.nav.rotations`.
 
 Two ways of keeping attitude:
 
@@ -13,9 +14,9 @@ Two ways of keeping attitude:
   and the gyros only carry it to the IMU times between attitude samples.
 
 In both modes the measured specific force, rotated by the attitude and with
-WGS-84 normal gravity added, drives velocity and position (the S2 motion
-model: the aircraft's own specific force, not a stationary-acceleration
-guess).
+WGS-84 normal gravity added, drives velocity and position (the motion model is
+the aircraft's own specific force, not a stationary-acceleration guess: "Tracking
+with the aircraft's kinematic and dynamic parameters").
 
 The local frame is treated as an inertial, flat frame with the vertical of
 its anchor (Earth rate, transport rate and the tilt of the local vertical
@@ -30,7 +31,9 @@ References
 ----------
 Titterton & Weston, Strapdown Inertial Navigation Technology, 2nd ed., ch. 3
 (quaternion attitude update) and ch. 12 (psi-angle error equations, 12.20-12.22);
-SEEDS.md S1 (INS filter states), S2 (specific force as the motion model).
+El-Mowafy (2005), RTK networks for precision approach with an adaptive GPS/INS blend
+(the INS filter states); "Tracking with the aircraft's kinematic and dynamic
+parameters" (specific force as the motion model).
 """
 
 from __future__ import annotations
@@ -41,10 +44,15 @@ from collections.abc import Sequence
 import numpy as np
 
 from companion.nav import earth
-from companion.nav.frames import skew
+from companion.nav.rotations import (
+    Quat,
+    quat_from_rotvec,
+    quat_mul,
+    quat_normalise,
+    rotate_by_rotvec,
+    skew,
+)
 from companion.types import FloatArray
-
-Quat = tuple[float, float, float, float]
 
 _M_RATIO = earth.OMEGA_IE_RADPS**2 * earth.A_M**2 * earth.B_M / earth.GM_M3PS2
 
@@ -52,72 +60,6 @@ N_ERR = 15
 """Error-state size: position (0:3), velocity (3:6), attitude (6:9), accel bias (9:12),
 gyro bias (12:15)."""
 IP, IV, IA, IBA, IBG = 0, 3, 6, 9, 12
-
-
-def quat_mul(a: Quat, b: Quat) -> Quat:
-    """Hamilton product ``a * b`` of (w, x, y, z) quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def quat_from_rotvec(rx: float, ry: float, rz: float) -> Quat:
-    """Quaternion of a rotation vector (rad)."""
-    ang = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if ang < 1e-8:
-        return (1.0 - ang * ang / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz)
-    s = math.sin(0.5 * ang) / ang
-    return (math.cos(0.5 * ang), rx * s, ry * s, rz * s)
-
-
-def quat_rotate(q: Quat, vx: float, vy: float, vz: float) -> tuple[float, float, float]:
-    """Rotate a vector by unit quaternion ``q`` (body to NED for ``q_nb``)."""
-    w, x, y, z = q
-    # t = 2 q_vec x v ; v' = v + w t + q_vec x t
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (
-        vx + w * tx + (y * tz - z * ty),
-        vy + w * ty + (z * tx - x * tz),
-        vz + w * tz + (x * ty - y * tx),
-    )
-
-
-def quat_normalise(q: Quat) -> Quat:
-    """Unit quaternion with non-negative scalar part."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    if q[0] < 0.0:
-        n = -n
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
-
-
-def quat_to_mat(q: Quat) -> FloatArray:
-    """Rotation matrix (3, 3) of a unit quaternion (``mat_nb`` for ``q_nb``)."""
-    return np.array(quat_to_mat_values(q)).reshape(3, 3)
-
-
-def quat_to_mat_values(
-    q: Quat,
-) -> tuple[float, float, float, float, float, float, float, float, float]:
-    """The entries of :func:`quat_to_mat`, row-major, as 9 floats (no array for hot paths)."""
-    w, x, y, z = q
-    return (
-        1 - 2 * (y * y + z * z),
-        2 * (x * y - w * z),
-        2 * (x * z + w * y),
-        2 * (x * y + w * z),
-        1 - 2 * (x * x + z * z),
-        2 * (y * z - w * x),
-        2 * (x * z - w * y),
-        2 * (y * z + w * x),
-        1 - 2 * (x * x + y * y),
-    )
 
 
 class LocalGravity:
@@ -345,32 +287,10 @@ class Mechanisation:
 
 
 def rotate_by_psi(q_nb: Quat, psi_ned_rad: FloatArray) -> Quat:
-    """Remove an attitude error ``psi``: C = (I + [psi x]) C_hat, as quaternions."""
+    """Remove an attitude error ``psi`` (rad, NED, shape (3,)): C = (I + [psi x]) C_hat, as
+    quaternions (:func:`companion.nav.rotations.rotate_by_rotvec`)."""
     rx, ry, rz = np.asarray(psi_ned_rad, dtype=float).tolist()
     return rotate_by_rotvec(q_nb, rx, ry, rz)
-
-
-def rotate_by_rotvec(q_nb: Quat, rx: float, ry: float, rz: float) -> Quat:
-    """:func:`rotate_by_psi` with ``psi`` (rad, NED) as three floats.
-
-    ``quat_normalise(quat_mul(quat_from_rotvec(rx, ry, rz), q_nb))`` written out in one body
-    (the same operations; several times per fix, so the calls are worth saving).
-    """
-    ang = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if ang < 1e-8:
-        aw, ax, ay, az = 1.0 - ang * ang / 8.0, 0.5 * rx, 0.5 * ry, 0.5 * rz
-    else:
-        s = math.sin(0.5 * ang) / ang
-        aw, ax, ay, az = math.cos(0.5 * ang), rx * s, ry * s, rz * s
-    bw, bx, by, bz = q_nb
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    if w < 0.0:
-        n = -n
-    return (w / n, x / n, y / n, z / n)
 
 
 def error_model_f(
@@ -391,7 +311,7 @@ def error_model_f(
 
     References
     ----------
-    Titterton & Weston, eq. 12.20-12.22 (flat, non-rotating frame); SEEDS.md S1
+    Titterton & Weston, eq. 12.20-12.22 (flat, non-rotating frame); El-Mowafy (2005)
     (first-order Gauss-Markov sensor errors).
     """
     f = np.zeros((N_ERR, N_ERR))

@@ -8,14 +8,15 @@ state and reset to zero after each update, so only the correction is returned.
 
 Everything is pure numpy/scipy; no state lives here except in
 :class:`InnovationWindow`, the moving-window statistics used by the adaptive
-noise estimation of S1.
+noise estimation of the GNSS/INS blend (:mod:`companion.nav.blend.adaptive`).
 
 References
 ----------
 Van Loan, "Computing integrals involving the matrix exponential", IEEE TAC 23(3), 1978.
 Bucy & Joseph (1968) for the Joseph-form covariance update.
 Mohamed & Schwarz, "Adaptive Kalman filtering for INS/GPS", J. Geodesy 73, 1999
-(innovation-based adaptive estimation, as summarised in SEEDS.md S1).
+(innovation-based adaptive estimation, as used by El-Mowafy 2005, RTK networks for
+precision approach with an adaptive GPS/INS blend).
 """
 
 from __future__ import annotations
@@ -208,7 +209,7 @@ def joseph_update(
 
     References
     ----------
-    SEEDS.md S1 (the blend's K, update equations); Joseph form: Bucy & Joseph (1968).
+    El-Mowafy (2005) (the blend's K, update equations); Joseph form: Bucy & Joseph (1968).
     """
     return _joseph(p_mat, nu, h_mat, r_mat, None)
 
@@ -318,7 +319,7 @@ def chi2_gate(false_alarm_prob: float, dof: int) -> float:
 
 
 class InnovationWindow:
-    """Moving-window means of per-component statistics (S1 adaptive R and Q).
+    """Moving-window means of per-component statistics (the blend's adaptive R and Q).
 
     Each of ``n_components`` keeps its last ``window`` values (a running sum makes
     the mean O(1); it is recomputed exactly every ``window`` additions so rounding

@@ -1,16 +1,17 @@
-"""Motion models that carry position through a GNSS gap (S2).
+"""Motion models that carry position through a GNSS gap.
 
-S2's lesson: a tracker whose motion model is a stationary-acceleration guess
-(constant velocity, constant acceleration, Singer) diverges in manoeuvres; the
-model that carries position through a gap should be the aircraft's own
-measured specific force. In ``companion`` that model *is* the INS
-(:mod:`companion.nav.ins`, used by :class:`companion.nav.blend.BlendNavigator`).
+The lesson of "Tracking with the aircraft's kinematic and dynamic parameters": a
+tracker whose motion model is a stationary-acceleration guess (constant velocity,
+constant acceleration, Singer) diverges in manoeuvres; the model that carries position
+through a gap should be the aircraft's own measured specific force. In ``companion``
+that model *is* the INS (:mod:`companion.nav.ins`, used by
+:class:`companion.nav.blend.BlendNavigator`).
 
 This module keeps the baseline it is measured against, and what runs when no
 IMU stream is present: Singer's model per NED axis, as a
 :class:`companion.nav.navigator.Navigator`. Per axis the state is position,
 velocity and acceleration, the acceleration a first-order Gauss-Markov process
-with manoeuvre time constant ``1/alpha_m`` (S2):
+with manoeuvre time constant ``1/alpha_m``:
 
     p(k) = p(k-1) + v(k-1) T + a(k-1) T^2 / 2
     v(k) = v(k-1) + a(k-1) T
@@ -22,9 +23,9 @@ baseline is :class:`companion.nav.passthrough.PassthroughNavigator`.
 
 References
 ----------
-SEEDS.md S2 (Singer model and its failure in manoeuvres); Singer, "Estimating
-optimal tracking filter performance for manned maneuvering targets", IEEE
-TAES 6(4), 1970.
+"Tracking with the aircraft's kinematic and dynamic parameters" (the Singer model
+and its failure in manoeuvres); Singer, "Estimating optimal tracking filter performance
+for manned maneuvering targets", IEEE TAES 6(4), 1970.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ from companion.nav.frames import LocalFrame
 from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
 from companion.nav.kalman import chi2_gate, joseph_update, predict_covariance, van_loan
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
 log = logging.getLogger(__name__)
@@ -51,38 +53,23 @@ _N = 9
 class SingerConfig:
     """Configuration of :class:`SingerNavigator`."""
 
-    maneuver_tau_s: float = 20.0
-    """Manoeuvre time constant 1/alpha_m, s (S2: the acceleration's correlation time)."""
-    accel_sigma_mps2: tuple[float, float, float] = (1.5, 1.5, 0.5)
+    maneuver_tau_s: float = ranged(20.0, gt=0.0)
+    """Manoeuvre time constant 1/alpha_m, s (the acceleration's correlation time)."""
+    accel_sigma_mps2: tuple[float, float, float] = ranged((1.5, 1.5, 0.5), gt=0.0, length=3)
     """Steady-state 1-sigma of the manoeuvre acceleration per N, E, D axis, m/s^2."""
-    gate_false_alarm_prob: float = 1e-4
+    gate_false_alarm_prob: float = ranged(1e-4, gt=0.0, lt=1.0)
     """Probability that a consistent fix fails the innovation chi-square gate."""
-    vel_std_fallback_mps: float = 0.3
+    vel_std_fallback_mps: float = ranged(0.3, gt=0.0)
     """Velocity 1-sigma when the receiver reported none, m/s."""
-    init_vel_sigma_mps: float = 5.0
+    init_vel_sigma_mps: float = ranged(5.0, gt=0.0)
     """Velocity 1-sigma at start on axes the first fix gives no velocity for, m/s."""
-    pos_std_floor_m: float = 0.01
+    pos_std_floor_m: float = ranged(0.01, gt=0.0)
     """Floor of the position measurement 1-sigma, m."""
-    vel_std_floor_mps: float = 0.02
+    vel_std_floor_mps: float = ranged(0.02, gt=0.0)
     """Floor of the velocity measurement 1-sigma, m/s."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "maneuver_tau_s",
-            "vel_std_fallback_mps",
-            "init_vel_sigma_mps",
-            "pos_std_floor_m",
-            "vel_std_floor_mps",
-        ):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be a positive finite number, got {value}")
-        if len(self.accel_sigma_mps2) != 3 or not all(
-            math.isfinite(s) and s > 0.0 for s in self.accel_sigma_mps2
-        ):
-            raise ValueError("accel_sigma_mps2 must be 3 positive finite numbers")
-        if not 0.0 < self.gate_false_alarm_prob < 1.0:
-            raise ValueError("gate_false_alarm_prob must be in (0, 1)")
+        check_ranges(self)
 
 
 def singer_matrices(

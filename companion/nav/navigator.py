@@ -89,7 +89,7 @@ class Navigator(Protocol):
 
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """Take the autopilot's attitude; ``yaw_correction_rad`` (taxi heading
-        correction, S4) is subtracted from its yaw before use."""
+        correction, Markelov et al.) is subtracted from its yaw before use."""
         ...
 
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
@@ -105,8 +105,8 @@ class Navigator(Protocol):
         ...
 
     def reset_heading(self, yaw_sigma_rad: float) -> None:
-        """A taxi heading correction (S4) was applied to the attitude input: restart the
-        navigator's own heading error from it, with 1-sigma ``yaw_sigma_rad``
+        """A taxi heading correction (Markelov et al.) was applied to the attitude input:
+        restart the navigator's own heading error from it, with 1-sigma ``yaw_sigma_rad``
         (navigators without an attitude ignore it)."""
         ...
 

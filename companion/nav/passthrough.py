@@ -27,6 +27,7 @@ from scipy.stats import chi2
 
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
 _EYE3 = np.eye(3)
@@ -36,24 +37,17 @@ _EYE3 = np.eye(3)
 class PassthroughConfig:
     """Tuning of the constant-velocity pass-through navigator."""
 
-    accel_psd_m2ps3: float = 0.5
+    accel_psd_m2ps3: float = ranged(0.5, gt=0.0)
     """White acceleration noise spectral density per axis (manoeuvres the model ignores)."""
-    gate_false_alarm_prob: float = 1e-4
+    gate_false_alarm_prob: float = ranged(1e-4, gt=0.0, lt=1.0)
     """Probability that a good fix fails the 3-dof position gate."""
-    vertical_velocity_gain: float = 0.3
+    vertical_velocity_gain: float = ranged(0.3, gt=0.0, le=1.0)
     """Smoothing gain of the height-difference vertical velocity (0 < gain <= 1)."""
-    default_vel_var_m2ps2: float = 0.25
+    default_vel_var_m2ps2: float = ranged(0.25, gt=0.0)
     """Velocity variance used when the receiver gives no velocity accuracy."""
 
     def __post_init__(self) -> None:
-        if self.accel_psd_m2ps3 <= 0.0:
-            raise ValueError("accel_psd_m2ps3 must be > 0")
-        if not 0.0 < self.gate_false_alarm_prob < 1.0:
-            raise ValueError("gate_false_alarm_prob must be in (0, 1)")
-        if not 0.0 < self.vertical_velocity_gain <= 1.0:
-            raise ValueError("vertical_velocity_gain must be in (0, 1]")
-        if self.default_vel_var_m2ps2 <= 0.0:
-            raise ValueError("default_vel_var_m2ps2 must be > 0")
+        check_ranges(self)
 
 
 class PassthroughNavigator:

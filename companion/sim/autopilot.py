@@ -35,7 +35,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from companion.mavlink import units
-from companion.nav.frames import quat_to_euler
+from companion.nav.rotations import quat_to_euler
 from companion.types import (
     AttitudeSample,
     AutopilotSolution,

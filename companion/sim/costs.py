@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.nav.frames import euler_to_quat, quat_to_euler
+from companion.nav.rotations import euler_to_quat, quat_to_euler
+from companion.nav.rotations import quat_to_mat as _mat
 from companion.sim.flight import SimFlight, simulate
 from companion.sim.scenarios import make_scenario
 from companion.sim.trajectory import gravity_down_mps2
@@ -58,17 +59,6 @@ def _rotvec_quat(phi: FloatArray) -> FloatArray:
         return np.array([1.0, 0.5 * phi[0], 0.5 * phi[1], 0.5 * phi[2]])
     s = math.sin(0.5 * ang) / ang
     return np.array([math.cos(0.5 * ang), s * phi[0], s * phi[1], s * phi[2]])
-
-
-def _mat(q: FloatArray) -> FloatArray:
-    w, x, y, z = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def dead_reckon(flight: SimFlight, t_start_s: float, window_s: float) -> DeadReckoningError:

@@ -9,8 +9,8 @@ import pytest
 from scipy.stats import chi2
 
 from companion.integrity.coast import CoastConfig, CoastState, InertialCoast
-from companion.nav.frames import euler_to_mat_nb
 from companion.nav.navigator import NavState
+from companion.nav.rotations import euler_to_mat_nb
 from companion.types import AttitudeSample, GnssFix, ImuSample
 
 G = np.array([0.0, 0.0, 9.81])

@@ -12,7 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.mavlink import units
 from companion.mavlink.decode import MAV_CMD_USER_1, Decoder, DecoderConfig
-from companion.nav.frames import euler_to_quat
+from companion.nav.rotations import euler_to_quat
 from companion.types import (
     AttitudeSample,
     AutopilotFlavour,

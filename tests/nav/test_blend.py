@@ -11,8 +11,9 @@ import pytest
 from scipy.stats import chi2
 
 from companion.nav.blend import BlendConfig, BlendNavigator
-from companion.nav.frames import LocalFrame, euler_to_mat_nb
+from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement
+from companion.nav.rotations import euler_to_mat_nb, skew
 from companion.types import AttitudeSample, FixType, ImuSample
 from tests.nav.test_ins import ALT0, LAT0, Turn
 
@@ -68,7 +69,7 @@ def simulate(spec: SimSpec, seed: int) -> SimRun:
         roll, pitch, yaw = traj.euler(t)
         # the attitude error is a small rotation in NED: C_ap = (I - [e x]) C
         mat = euler_to_mat_nb(roll, pitch, yaw)
-        c_ap = (np.eye(3) - _skew(att_err)) @ mat
+        c_ap = (np.eye(3) - skew(att_err)) @ mat
         r_ap = math.atan2(c_ap[2, 1], c_ap[2, 2])
         p_ap = -math.asin(c_ap[2, 0])
         y_ap = math.atan2(c_ap[1, 0], c_ap[0, 0])
@@ -95,10 +96,6 @@ def simulate(spec: SimSpec, seed: int) -> SimRun:
         events.append((t_rx, 2, meas))
     events.sort(key=lambda e: (e[0], e[1]))
     return SimRun([e[2] for e in events], spec)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def config_for(spec: SimSpec, **overrides: object) -> BlendConfig:
@@ -452,10 +449,17 @@ def test_unknown_accuracy_uses_fallback_by_fix_type() -> None:
 def test_config_validation_names_the_field() -> None:
     with pytest.raises(ValueError, match="mode"):
         BlendConfig(mode="magic")
-    with pytest.raises(ValueError, match="cov_interval_s"):
+    with pytest.raises(ValueError, match="cov_interval_s must be > 0, got 0.0"):
         BlendConfig(cov_interval_s=0.0)
     with pytest.raises(ValueError, match="r_scale_bounds"):
         BlendConfig(r_scale_bounds=(2.0, 3.0))
+    with pytest.raises(ValueError, match="att_err_sigma_rad"):
+        BlendConfig(att_err_sigma_rad=(0.001, 0.001))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="adaptive_min_epochs"):
+        BlendConfig(adaptive_window=5, adaptive_min_epochs=6)
+    with pytest.raises(ValueError, match="history_s"):
+        BlendConfig(history_s=0.15)
+    assert BlendConfig(accel_bias_tau_s=math.inf).accel_bias_tau_s == math.inf
     with pytest.raises(ValueError, match="grade"):
         BlendConfig.for_grade("navigation")
     assert (

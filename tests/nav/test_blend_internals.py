@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from companion.nav import ins
-from companion.nav.blend import _carry_pos_vel, _euler_to_quat
-from companion.nav.frames import euler_to_quat
+from companion.nav.blend.error_model import carry_pos_vel, open_segment_cov
+from companion.nav.rotations import Quat, quat_from_rotvec, quat_mul, quat_normalise
 
 
 def test_carry_pos_vel_equals_the_transition_form() -> None:
@@ -26,14 +24,8 @@ def test_carry_pos_vel_equals_the_transition_form() -> None:
         q[0:3, 3:6] = q[3:6, 0:3] = np.diag(psd) * dt**2 / 2.0
         q[3:6, 3:6] = np.diag(psd) * dt
         want = phi @ p @ phi.T + q
-        got = _carry_pos_vel(p, dt, psd)
+        got = carry_pos_vel(p, dt, psd)
         np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
-
-
-def test_float_euler_to_quat_is_the_frames_formula_bit_for_bit() -> None:
-    rng = np.random.default_rng(9)
-    for roll, pitch, yaw in rng.uniform(-math.pi, math.pi, (200, 3)):
-        assert _euler_to_quat(roll, pitch, yaw) == tuple(euler_to_quat(roll, pitch, yaw).tolist())
 
 
 def test_mechanisation_inject_matches_the_per_component_form() -> None:
@@ -51,19 +43,9 @@ def test_mechanisation_inject_matches_the_per_component_form() -> None:
     assert mech.q_nb == ins.rotate_by_psi(q0, dx[6:9])
 
 
-def _random_unit_quat(rng: np.random.Generator) -> ins.Quat:
+def _random_unit_quat(rng: np.random.Generator) -> Quat:
     w, x, y, z = rng.normal(size=4)
-    return ins.quat_normalise((float(w), float(x), float(y), float(z)))
-
-
-def test_rotate_by_rotvec_equals_the_composed_quaternion_form() -> None:
-    rng = np.random.default_rng(11)
-    for scale in (1e-10, 1e-4, 0.3):  # both branches of the rotation-vector exponential
-        for _ in range(200):
-            q = _random_unit_quat(rng)
-            rx, ry, rz = (scale * rng.normal(size=3)).tolist()
-            want = ins.quat_normalise(ins.quat_mul(ins.quat_from_rotvec(rx, ry, rz), q))
-            assert ins.rotate_by_rotvec(q, rx, ry, rz) == want
+    return quat_normalise((float(w), float(x), float(y), float(z)))
 
 
 def test_carry_attitude_equals_the_composed_quaternion_form() -> None:
@@ -78,12 +60,11 @@ def test_carry_attitude_equals_the_composed_quaternion_form() -> None:
             dt = float(rng.uniform(-0.04, 0.04))
             g, bg = mech.last_gyro_b_radps, mech.bg
             omega_dt = [(g[i] - bg[i]) * dt for i in range(3)]
-            want = ins.quat_normalise(ins.quat_mul(q, ins.quat_from_rotvec(*omega_dt)))
+            want = quat_normalise(quat_mul(q, quat_from_rotvec(*omega_dt)))
             assert mech.carry_attitude(q, dt) == want
 
 
 def test_open_segment_covariance_equals_the_array_form() -> None:
-    from companion.nav.blend import _open_segment_cov
 
     rng = np.random.default_rng(13)
     for _ in range(100):
@@ -95,6 +76,6 @@ def test_open_segment_covariance_equals_the_array_form() -> None:
         p_pos += np.diag(psd * dt**3 / 3.0)
         p_pos = 0.5 * (p_pos + p_pos.T)
         p_vel = b[3:6, 3:6] + np.diag(psd * dt)
-        got = np.array(_open_segment_cov(b.tolist(), psd.tolist(), dt))
+        got = np.array(open_segment_cov(b.tolist(), psd.tolist(), dt))
         np.testing.assert_allclose(got[:9].reshape(3, 3), p_pos, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(got[9:].reshape(3, 3), p_vel, rtol=1e-14, atol=1e-15)

@@ -1,4 +1,4 @@
-"""Frames: exact geodesy against pymap3d, rotations, angle wrapping."""
+"""Frames: exact geodesy against pymap3d, and the rotation between two local frames."""
 
 from __future__ import annotations
 
@@ -8,16 +8,7 @@ import numpy as np
 import pymap3d
 import pytest
 
-from companion.nav.frames import (
-    LocalFrame,
-    ecef_to_geodetic,
-    euler_to_mat_nb,
-    euler_to_quat,
-    geodetic_to_ecef_m,
-    mat_nb_to_euler,
-    quat_to_euler,
-    wrap_pi,
-)
+from companion.nav.frames import LocalFrame, ecef_to_geodetic, geodetic_to_ecef_m
 from companion.nav.navigator import rotation_between_frames
 
 
@@ -52,16 +43,3 @@ def test_rotation_between_frames_is_the_ned_axes_turn():
     # north points east of north, by d_lon * sin(lat) to first order in d_lon
     angle = math.atan2(rot[1, 0], rot[0, 0])
     assert angle == pytest.approx(math.radians(0.3) * math.sin(math.radians(52.0)), rel=1e-5)
-
-
-def test_euler_quaternion_matrix_agree():
-    rng = np.random.default_rng(3)
-    for _ in range(100):
-        r, p, y = rng.uniform(-3, 3), rng.uniform(-1.5, 1.5), rng.uniform(-3, 3)
-        np.testing.assert_allclose(mat_nb_to_euler(euler_to_mat_nb(r, p, y)), (r, p, y), atol=1e-9)
-        np.testing.assert_allclose(quat_to_euler(euler_to_quat(r, p, y)), (r, p, y), atol=1e-9)
-
-
-def test_wrap_pi():
-    assert wrap_pi(math.pi + 0.1) == pytest.approx(-math.pi + 0.1)
-    assert wrap_pi(-math.pi - 0.1) == pytest.approx(math.pi - 0.1)

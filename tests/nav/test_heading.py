@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 from companion.nav.earth import radii_of_curvature_m
-from companion.nav.frames import wrap_pi
 from companion.nav.heading import (
     HeadingConfig,
     HeadingCorrector,
@@ -25,6 +24,7 @@ from companion.nav.heading import (
     RunningStats,
     yaw_rate_radps,
 )
+from companion.nav.rotations import wrap_pi
 from companion.types import (
     Alert,
     AlertCode,

@@ -7,11 +7,16 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
-import scipy.linalg
 
 from companion.nav import ins
-from companion.nav.frames import euler_to_mat_nb, euler_to_quat, mat_nb_to_euler
 from companion.nav.kalman import expm_taylor
+from companion.nav.rotations import (
+    Quat,
+    euler_to_mat_nb,
+    euler_to_quat,
+    mat_nb_to_euler,
+    quat_to_mat,
+)
 
 LAT0 = math.radians(52.0)
 ALT0 = 120.0
@@ -96,7 +101,7 @@ class Turn:
         g = np.array([0.0, 0.0, self.gravity.down_mps2(p[0], p[2])])
         return self.mat_nb(t).T @ (self.acc(t) - g)
 
-    def q_nb(self, t: float) -> ins.Quat:
+    def q_nb(self, t: float) -> Quat:
         q = euler_to_quat(*self.euler(t))
         return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
@@ -124,32 +129,13 @@ def run_strapdown(
     return mech
 
 
-def test_quaternion_helpers_agree_with_frames() -> None:
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        roll, pitch, yaw = rng.uniform(-1.4, 1.4, 3)
-        q = tuple(float(c) for c in euler_to_quat(roll, pitch, yaw))
-        mat = euler_to_mat_nb(roll, pitch, yaw)
-        np.testing.assert_allclose(ins.quat_to_mat(q), mat, atol=1e-12)  # type: ignore[arg-type]
-        v = rng.normal(size=3)
-        np.testing.assert_allclose(ins.quat_rotate(q, *v), mat @ v, atol=1e-12)  # type: ignore[arg-type]
-        rv = rng.normal(size=3) * 0.3
-        np.testing.assert_allclose(
-            ins.quat_to_mat(ins.quat_from_rotvec(*rv)), scipy.linalg.expm(_skew(rv)), atol=1e-12
-        )
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
 def test_strapdown_reproduces_closed_form_turn() -> None:
     traj = Turn()
     mech = run_strapdown(traj, 60.0, 200.0)
     pos, vel = mech.state_vectors()
     assert np.linalg.norm(pos - traj.pos(60.0)) < 1e-3
     assert np.linalg.norm(vel - traj.vel(60.0)) < 1e-4
-    est = mat_nb_to_euler(ins.quat_to_mat(mech.q_nb))
+    est = mat_nb_to_euler(quat_to_mat(mech.q_nb))
     true = traj.euler(60.0)
     assert (
         max(abs(math.remainder(a - b, 2 * math.pi)) for a, b in zip(est, true, strict=True)) < 1e-5
@@ -217,7 +203,7 @@ def test_error_model_matches_perturbed_integration() -> None:
     actual_pos = np.array(mech.pos) - np.array(ref.pos)
     actual_vel = np.array(mech.vel) - np.array(ref.vel)
     # attitude error: C_hat = (I - [psi x]) C  ->  [psi x] = I - C_hat C^T
-    c_err = np.eye(3) - ins.quat_to_mat(mech.q_nb) @ ins.quat_to_mat(ref.q_nb).T
+    c_err = np.eye(3) - quat_to_mat(mech.q_nb) @ quat_to_mat(ref.q_nb).T
     actual_psi = np.array([c_err[2, 1], c_err[0, 2], c_err[1, 0]])
     # second-order terms of a 0.5 m / 1 mrad perturbation: agreement to a few per cent
     np.testing.assert_allclose(actual_pos, predicted[0:3], atol=0.02 * np.abs(predicted[0:3]).max())
@@ -244,7 +230,7 @@ def test_inject_removes_error() -> None:
     np.testing.assert_allclose(mech.pos, traj.pos(0.0), atol=1e-12)
     np.testing.assert_allclose(mech.vel, traj.vel(0.0), atol=1e-12)
     np.testing.assert_allclose(mech.ba, 0.0, atol=1e-15)
-    np.testing.assert_allclose(ins.quat_to_mat(mech.q_nb), traj.mat_nb(0.0), atol=1e-10)
+    np.testing.assert_allclose(quat_to_mat(mech.q_nb), traj.mat_nb(0.0), atol=1e-10)
 
 
 def test_gravity_follows_height_and_latitude() -> None:

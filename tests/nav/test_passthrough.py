@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -97,3 +99,10 @@ def test_diagonal_closed_form_nis_equals_the_general_solve() -> None:
     s = pred.pos_cov_ned_m2 + np.diag(np.full(3, 0.25))
     nu = pos - pred.pos_ned_m
     assert up.nis == pytest.approx(float(nu @ np.linalg.solve(s, nu)), rel=1e-12)
+
+
+def test_config_validation_names_the_field_and_range() -> None:
+    with pytest.raises(ValueError, match=r"vertical_velocity_gain must be in \(0, 1\], got 0.0"):
+        PassthroughConfig(vertical_velocity_gain=0.0)
+    with pytest.raises(ValueError, match="accel_psd_m2ps3"):
+        PassthroughConfig(accel_psd_m2ps3=math.nan)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.nav.frames import euler_to_quat, quat_to_euler
+from companion.nav.rotations import euler_to_quat, quat_to_euler
 from companion.sim import make_scenario, simulate
 from companion.sim.flight import _make_path
 from companion.sim.scenarios import build_script

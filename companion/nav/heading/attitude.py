@@ -15,8 +15,8 @@ import bisect
 import math
 from collections.abc import Callable
 
-from companion.nav.frames import wrap_pi
 from companion.nav.heading.config import HeadingConfig
+from companion.nav.rotations import wrap_pi
 from companion.types import AttitudeSample
 
 RATE_BASELINE_S = 0.5

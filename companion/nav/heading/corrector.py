@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from companion.nav.frames import wrap_pi
 from companion.nav.heading.attitude import AttitudeHistory
 from companion.nav.heading.config import HeadingConfig
 from companion.nav.heading.criteria import Verdict, judge_sample
@@ -35,6 +34,7 @@ from companion.nav.heading.park import ParkCheck
 from companion.nav.heading.state import HeadingPhase, restore_state, to_state
 from companion.nav.heading.stats import CycleSample, HeadingEstimate
 from companion.nav.heading.track import PositionTrack
+from companion.nav.rotations import wrap_pi
 from companion.types import (
     Alert,
     AlertCode,

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from companion.nav.frames import wrap_pi
+from companion.nav.rotations import wrap_pi
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,8 +13,8 @@ import math
 from collections.abc import Callable
 
 from companion.nav.earth import radii_of_curvature_m
-from companion.nav.frames import wrap_pi
 from companion.nav.heading.config import HeadingConfig
+from companion.nav.rotations import wrap_pi
 from companion.types import GnssFix
 
 

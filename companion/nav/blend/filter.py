@@ -1,0 +1,489 @@
+"""The blend's navigator: the error-state Kalman filter that ties the mechanisation, the
+error model, the snapshot history, the GNSS measurement model and the adaptive noise
+together (the method: :mod:`companion.nav.blend`)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+
+import numpy as np
+
+from companion.nav import ins
+from companion.nav.blend.adaptive import AdaptiveNoise
+from companion.nav.blend.config import BlendConfig
+from companion.nav.blend.diagnostics import BlendDiagnostics
+from companion.nav.blend.error_model import (
+    IGB,
+    N_STATE,
+    ErrorModel,
+    carry_pos_vel,
+    open_segment_cov,
+)
+from companion.nav.blend.history import (
+    History,
+    carry_correction,
+    inject_snapshot,
+    snapshot_of,
+    state_at,
+)
+from companion.nav.blend.measurement import GnssModel
+from companion.nav.blend.receiver import ReceiverError
+from companion.nav.frames import LocalFrame
+from companion.nav.kalman import chi2_gate, joseph_update_diag_r, predict_covariance
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.rotations import (
+    Quat,
+    euler_to_quat_values,
+    mat_to_quat,
+    quat_from_rotvec,
+    quat_mul,
+    quat_normalise,
+    quat_to_mat,
+    quat_to_yaw,
+    rotate_by_rotvec,
+    wrap_pi,
+)
+from companion.types import AttitudeSample, FixType, FloatArray, ImuSample
+
+log = logging.getLogger(__name__)
+
+_DEG = math.pi / 180.0
+
+
+class BlendNavigator:
+    """Adaptive GNSS/INS blend (implements :class:`companion.nav.navigator.Navigator`).
+
+    ``frame`` is the engine's local frame, used for the gravity model; it is
+    updated by :meth:`shift_frame`. Positions are of the IMU reference point.
+    """
+
+    def __init__(self, config: BlendConfig | None = None, frame: LocalFrame | None = None) -> None:
+        self.config = config or BlendConfig()
+        self._frame = frame or LocalFrame(45.0 * _DEG, 0.0, 0.0)
+        if frame is None:
+            log.warning("no local frame given: gravity evaluated at 45 deg latitude, 0 m")
+        cfg = self.config
+        self._strapdown = cfg.mode == "strapdown"
+        self._gm = cfg.gnss_error_model == "gauss_markov"
+        self._gates = {m: chi2_gate(cfg.gate_false_alarm_prob, m) for m in range(1, 7)}
+        self._accel_psd0 = cfg.accel_vrw_mps_rts**2
+        self._max_imu_gap_s = cfg.max_imu_gap_s
+        self._cov_interval_s = cfg.cov_interval_s
+        self._model = ErrorModel(cfg)
+        self._gnss = GnssModel(cfg)
+        self._adaptive = AdaptiveNoise(cfg, has_lever=self._gnss.has_lever, gauss_markov=self._gm)
+        self._rx = ReceiverError(cfg.gnss_err_tau_s)
+        self.reset()
+
+    # ------------------------------------------------------------------ protocol
+
+    @property
+    def initialised(self) -> bool:
+        """True once a state exists (after the first accepted fix with an attitude)."""
+        return self._init
+
+    def reset(self) -> None:
+        """Forget everything (the configuration and frame are kept)."""
+        self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
+        self._init = False
+        self._pre_imu: deque[tuple[float, list[float], list[float]]]
+        self._pre_imu = deque()
+        self._p = np.zeros((N_STATE, N_STATE))
+        self._rx.reset()
+        self._hist: History = deque()
+        self._att_q: Quat | None = None
+        self._att_t_s = math.nan
+        self._att_corr: Quat = (1.0, 0.0, 0.0, 0.0)
+        self._last_fuse_t_s = math.nan
+        self._adaptive.reset()
+        self.diag = BlendDiagnostics(accel_psd_ned=np.full(3, self._accel_psd0))
+        self._model.reset(self.diag.accel_psd_ned)
+
+    def on_imu(self, sample: ImuSample) -> None:
+        """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
+        acc_t = sample.acc_b_mps2.tolist()
+        gyro_t = sample.gyro_b_radps.tolist()
+        if len(acc_t) != 3 or len(gyro_t) != 3:
+            self._reject("imu_bad_shape")
+            return
+        if not math.isfinite(sum(acc_t) + sum(gyro_t)):  # NaN or inf makes the sum non-finite
+            self._reject("imu_not_finite")
+            return
+        mech = self._mech
+        if not self._init:
+            if self._pre_imu and sample.t_s <= self._pre_imu[-1][0]:
+                if sample.t_s > self._pre_imu[-1][0] - self.config.max_imu_gap_s:
+                    self._reject("imu_time_not_increasing")
+                    return
+                self._reject("imu_clock_restarted")  # a new clock: start the buffer again
+                self._pre_imu.clear()
+            self._pre_imu.append((sample.t_s, acc_t, gyro_t))
+            while self._pre_imu[0][0] < sample.t_s - self.config.history_s:
+                self._pre_imu.popleft()
+            mech.set_raw(acc_t, gyro_t)
+            mech.t_s = sample.t_s
+            return
+        dt = sample.t_s - mech.t_s
+        if dt <= 0.0:
+            self._reject("imu_time_not_increasing")
+            return
+        if dt > self._max_imu_gap_s:
+            self._reject("imu_gap")
+        mech.step(sample.t_s, acc_t, gyro_t)
+        if mech.seg_dt_s >= self._cov_interval_s:
+            self._close_segment()
+
+    def reset_heading(self, yaw_sigma_rad: float) -> None:
+        """A taxi heading correction (Markelov et al.) was applied to the attitude input:
+        restart the heading from the corrected autopilot yaw, 1-sigma ``yaw_sigma_rad``.
+
+        Attitude-aided: the filter's own yaw correction estimated part of the error the
+        taxi correction has now removed from the input; kept, it would correct twice.
+        Strapdown: the mechanisation's yaw is set to the corrected autopilot yaw.
+        Either way the yaw error's covariance restarts at ``yaw_sigma_rad``, uncorrelated.
+        """
+        if not (math.isfinite(yaw_sigma_rad) and yaw_sigma_rad > 0.0):
+            raise ValueError("yaw_sigma_rad must be finite and > 0")
+        if not self._init or self._att_q is None:
+            return
+        mech = self._mech
+        if self._strapdown:
+            target_yaw = quat_to_yaw(*self._att_q)
+            yaw = quat_to_yaw(*mech.q_nb)
+            turn = wrap_pi(target_yaw - yaw)
+        else:
+            w, x, y, z = self._att_corr
+            sign = 1.0 if w >= 0.0 else -1.0
+            # the correction's rotation about down (small-angle rotation vector)
+            turn = -2.0 * sign * z
+            self._att_corr = quat_normalise(
+                quat_mul(quat_from_rotvec(0.0, 0.0, turn), self._att_corr)
+            )
+        mech.q_nb = rotate_by_rotvec(mech.q_nb, 0.0, 0.0, turn)
+        k = ins.IA + 2
+        p = self._p
+        p[k, :] = 0.0
+        p[:, k] = 0.0
+        p[k, k] = yaw_sigma_rad**2
+        for snap in self._hist:
+            snap.q_nb = rotate_by_rotvec(snap.q_nb, 0.0, 0.0, turn)
+        log.info("heading restarted from the taxi correction: turned %.3f deg", math.degrees(turn))
+
+    def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
+        """Take the autopilot's attitude (yaw less ``yaw_correction_rad``).
+
+        Attitude-aided mode: it replaces the attitude (after the filter's own
+        estimated correction), carried by the gyro to the newest IMU time.
+        Strapdown mode: used only to initialise.
+        """
+        roll, pitch, yaw = sample.roll_rad, sample.pitch_rad, sample.yaw_rad
+        isfinite = math.isfinite
+        if not (
+            isfinite(roll) and isfinite(pitch) and isfinite(yaw) and isfinite(yaw_correction_rad)
+        ):
+            self._reject("attitude_not_finite")
+            return
+        self._att_q = euler_to_quat_values(roll, pitch, yaw - yaw_correction_rad)
+        self._att_t_s = sample.t_s
+        if self._init and not self._strapdown:
+            mech = self._mech
+            q_used = quat_mul(self._att_corr, self._att_q)
+            mech.q_nb = mech.carry_attitude(q_used, mech.t_s - sample.t_s)
+
+    def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
+        """Gate and fuse one fix at its own time; carry the correction to the newest IMU time."""
+        cfg = self.config
+        z_pos = meas.pos_ned_m.tolist()
+        if not (all(map(math.isfinite, z_pos)) and math.isfinite(meas.t_s)):
+            return self._refuse(meas, "position_not_finite")
+        r_pos_rep, r_vel_rep = self._gnss.reported_variances(meas)
+        if not self._init:
+            return self._initialise(meas, r_pos_rep, r_vel_rep)
+        mech = self._mech
+        if meas.t_s > mech.t_s + cfg.cov_interval_s:
+            return self._refuse(meas, "fix_ahead_of_imu")
+        if self._hist and meas.t_s < self._hist[0].t_s - cfg.cov_interval_s:
+            return self._refuse(meas, "fix_older_than_history")
+        if math.isfinite(self._last_fuse_t_s) and meas.t_s <= self._last_fuse_t_s - 1e-9:
+            return self._refuse(meas, "fix_out_of_order")
+
+        # per-fix vectors of 3 to 6 components are Python floats here (a numpy call costs
+        # more than the arithmetic); the same operations as the array forms, so the same values
+        scale = self._adaptive.r_scale(self.diag)
+        r_pos_scaled = [r * k for r, k in zip(r_pos_rep, scale, strict=True)]
+        self._follow_receiver_error(meas.fix_type, r_pos_scaled)
+        idx, pos_m, vel_m, q_m = state_at(self._hist, mech, meas.t_s, self._cov_interval_s)
+        snap = self._hist[idx]
+        p_m = snap.p_mat
+        dt_p = meas.t_s - snap.t_s
+        if dt_p > 0.0:
+            # the snapshot's covariance is up to cov_interval_s older than the fix: carry it
+            # (negligible in steady flight, not while the velocity is uncertain: after the
+            # first fix, where GPS_RAW_INT gives no vertical velocity, and after an outage)
+            p_m = carry_pos_vel(p_m, dt_p, self.diag.accel_psd_ned)
+        axes, y, h_mat, r_rep = self._gnss.innovation(
+            meas,
+            z_pos,
+            pos_m,
+            vel_m,
+            q_m,
+            r_pos_rep,
+            r_vel_rep,
+            mech.last_gyro_b_radps,
+            mech.bg,
+            self._rx.bias_ned_m,
+        )
+        if self._gm:  # the white part of the position noise; the rest is in states 15:18
+            r_rep[:3] = self._gnss.white_part(r_pos_rep)
+        # the adaptive scale is on the position components (the velocity components' is 1)
+        r_diag = [r_rep[0] * scale[0], r_rep[1] * scale[1], r_rep[2] * scale[2], *r_rep[3:]]
+        dof = len(y)
+        threshold = self._gates[dof]
+        y_arr = np.array(y)
+        try:
+            corr = joseph_update_diag_r(p_m, y_arr, h_mat, np.array(r_diag))
+        except ValueError:
+            return self._refuse(meas, "innovation_cov_not_pd")
+        innov_pos = -y_arr[:3]
+        s_pos = corr.innov_cov[:3, :3]
+        self.diag.last_nis = corr.nis
+        self.diag.last_dof = dof
+        if gate and corr.nis > threshold:
+            self.diag.gated += 1
+            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, corr.nis, threshold)
+            return GnssUpdate(meas.t_s, False, corr.nis, dof, threshold, innov_pos, s_pos, "gate")
+
+        d = corr.dx.tolist()
+        if cfg.adaptive and self._adaptive.update(
+            y, axes, h_mat, r_rep, p_m, corr, d, meas.t_s, self._last_fuse_t_s, self.diag
+        ):
+            self._model.set_accel_psd(self.diag.accel_psd_ned)
+        r_used = [*r_pos_scaled, math.nan, math.nan, math.nan]
+        for k, axis in enumerate(axes):
+            r_used[3 + axis] = r_diag[3 + k]
+        self.diag.r_used = np.array(r_used)
+        # the correction is for the fix time; injected at the snapshot, its position part
+        # moves with its velocity part over the time between them (a 2 m/s correction
+        # 0.05 s away would otherwise plant 0.1 m of position error)
+        lag = snap.t_s - meas.t_s
+        d[0] += lag * d[3]
+        d[1] += lag * d[4]
+        d[2] += lag * d[5]
+        self._apply(idx, d, corr.p_post)
+        self._last_fuse_t_s = meas.t_s
+        self.diag.fused += 1
+        return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
+
+    def predict(self, t_s: float) -> NavState | None:
+        """The state carried from the newest IMU time to ``t_s`` (constant velocity), unchanged."""
+        if not self._init:
+            return None
+        mech = self._mech
+        dt = max(0.0, t_s - mech.t_s)
+        # covariance at the newest IMU time: the last propagated P plus the open segment
+        dt_p = max(0.0, t_s - self._hist[-1].t_s)
+        cov = open_segment_cov(self._p[0:6, 0:6].tolist(), self.diag.accel_psd_ned.tolist(), dt_p)
+        w, x, y, z = mech.q_nb
+        yaw = quat_to_yaw(w, x, y, z)
+        vn, ve, vd = mech.vel
+        pn, pe, pd = mech.pos
+        if dt > 0.0:
+            # carry the heading with the latest body rate (turns at 10 deg/s move it
+            # 0.2 deg in one 50 Hz IMU period): the down row of mat_nb times the rate
+            g = mech.last_gyro_b_radps
+            bg = mech.bg
+            yaw_rate = (
+                2 * (x * z - w * y) * (g[0] - bg[0])
+                + 2 * (y * z + w * x) * (g[1] - bg[1])
+                + (1 - 2 * (x * x + y * y)) * (g[2] - bg[2])
+            )
+            yaw = wrap_pi(yaw + yaw_rate * dt)
+        # one array each for the vectors and the covariances (views of them in the state)
+        pos_vel = np.array((pn + vn * dt, pe + ve * dt, pd + vd * dt, vn, ve, vd))
+        cov_pv = np.array(cov).reshape(2, 3, 3)
+        return NavState(t_s, pos_vel[0:3], pos_vel[3:6], cov_pv[0], cov_pv[1], yaw)
+
+    def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
+        """Re-express the state in ``new`` (position through geodetic, vectors rotated)."""
+        self._frame = new
+        self._mech.set_gravity(ins.LocalGravity(new.lat0_rad, new.alt0_m))
+        if not self._init:
+            return
+        if self._mech.seg_dt_s > 0.0:
+            self._close_segment()
+        rot = rotation_between_frames(old, new)
+        mech = self._mech
+        lat, lon, alt = old.ned_to_lla(np.array(mech.pos))
+        mech.pos = [float(c) for c in new.lla_to_ned(lat, lon, alt)]
+        mech.vel = [float(c) for c in rot @ np.array(mech.vel)]
+        q_rot = mat_to_quat(rot)
+        mech.q_nb = quat_normalise(quat_mul(q_rot, mech.q_nb))
+        t = np.eye(N_STATE)
+        self._rx.rotate(rot)
+        for k in (ins.IP, ins.IV, ins.IA, IGB):
+            t[k : k + 3, k : k + 3] = rot
+        self._p = t @ self._p @ t.T
+        self._att_corr = quat_normalise(quat_mul(q_rot, self._att_corr))
+        self._hist = deque([snapshot_of(mech, self._p)])
+        self._last_fuse_t_s = math.nan
+
+    # ------------------------------------------------------------------ diagnostics
+
+    @property
+    def r_estimate(self) -> FloatArray:
+        """Measurement variances of the last update (pos N, E, D, vel N, E, D), (6,)."""
+        return self.diag.r_used.copy()
+
+    @property
+    def q_estimate_accel_psd(self) -> FloatArray:
+        """Accelerometer white-noise PSD in use per NED axis, m^2/s^3, (3,)."""
+        return self.diag.accel_psd_ned.copy()
+
+    @property
+    def covariance(self) -> FloatArray:
+        """Error-state covariance at the last covariance epoch, (18, 18)."""
+        return self._p.copy()
+
+    @property
+    def biases(self) -> tuple[FloatArray, FloatArray]:
+        """Accelerometer (m/s^2) and gyro (rad/s) bias estimates, body axes, (3,) each."""
+        return np.array(self._mech.ba), np.array(self._mech.bg)
+
+    @property
+    def attitude_q_nb(self) -> FloatArray:
+        """Body-to-NED quaternion (w, x, y, z) in use, (4,)."""
+        return np.array(self._mech.q_nb)
+
+    @property
+    def imu_t_s(self) -> float:
+        """Time of the newest IMU sample integrated, s."""
+        return self._mech.t_s
+
+    # ------------------------------------------------------------------ internals
+
+    def _reject(self, reason: str) -> None:
+        rej = self.diag.rejected
+        rej[reason] = rej.get(reason, 0) + 1
+        if rej[reason] in (1, 10, 100, 1000) or rej[reason] % 10000 == 0:
+            log.warning("blend rejected input (%s), %d so far", reason, rej[reason])
+
+    def _refuse(self, meas: GnssMeasurement, reason: str) -> GnssUpdate:
+        self._reject(reason)
+        nan3 = np.full(3, np.nan)
+        return GnssUpdate(
+            meas.t_s, False, math.nan, 0, math.nan, nan3, np.full((3, 3), np.nan), reason
+        )
+
+    def _close_segment(self) -> None:
+        """Propagate P over the accumulated segment and push a snapshot."""
+        mech = self._mech
+        dt, f_ned = mech.take_segment_values()
+        snap = self._hist[-1]
+        phi, qd = self._model.transition(dt, f_ned, mech.q_nb)
+        snap.phi, snap.qd = phi, qd
+        self._p = predict_covariance(self._p, phi, qd)
+        self._hist.append(snapshot_of(mech, self._p))
+        horizon = mech.t_s - self.config.history_s
+        while len(self._hist) > 2 and self._hist[1].t_s <= horizon:
+            self._hist.popleft()
+
+    def _follow_receiver_error(self, fix_type: FixType, var: list[float]) -> None:
+        """Keep the receiver-error states in step with the fix (variance ``var``, 3 floats);
+        on a restart, decorrelate them from the rest of the state in P and the history."""
+        if not self._gm:
+            return
+        change = self._rx.follow(fix_type, var)
+        if change == "restart":
+            var_block = np.diag(var)
+            for p in [self._p] + [snap.p_mat for snap in self._hist]:
+                p[IGB : IGB + 3, :] = 0.0
+                p[:, IGB : IGB + 3] = 0.0
+                p[IGB : IGB + 3, IGB : IGB + 3] = var_block
+            self._model.restart_receiver_error(self._rx.var_ned_m2, self._rx.tau_s)
+        elif change == "variance":
+            self._model.set_receiver_variance(self._rx.var_ned_m2)
+
+    def _apply(self, idx: int, d: list[float], p_post: FloatArray) -> None:
+        """Carry a correction ``d`` (floats) made at snapshot ``idx`` to the newest IMU time
+        through the buffered transitions, correcting the snapshots on the way and the
+        nominal state."""
+        hist = self._hist
+        mech = self._mech
+        hist[idx].p_mat = p_post
+        inject_snapshot(hist[idx], d)
+        p = p_post
+        dt_open = mech.seg_dt_s
+        if idx < len(hist) - 1 or dt_open > 0.0:
+            dx, p = carry_correction(hist, idx, np.array(d), p)
+            if dt_open > 0.0:  # the open segment (shorter than cov_interval_s)
+                dx = self._model.carry_open_segment(dx, mech.seg_fn_sum, dt_open, mech.q_nb)
+            d = dx.tolist()
+        self._p = p
+        mech.inject_values(d)
+        if not self._strapdown:
+            self._att_corr = rotate_by_rotvec(self._att_corr, d[6], d[7], d[8])
+        if self._gm:
+            self._rx.inject(d[IGB : IGB + 3])
+
+    def _initialise(
+        self, meas: GnssMeasurement, r_pos_l: list[float], r_vel_l: list[float]
+    ) -> GnssUpdate:
+        """Start from the first fix and the latest attitude, at the newest IMU time."""
+        cfg = self.config
+        r_pos, r_vel = np.array(r_pos_l), np.array(r_vel_l)
+        if self._att_q is None:
+            return self._refuse(meas, "no_attitude_yet")
+        pre = self._pre_imu
+        if not pre:
+            return self._refuse(meas, "no_imu_yet")
+        if meas.t_s < pre[0][0]:
+            return self._refuse(meas, "fix_older_than_history")
+        mech = self._mech
+        # start at the fix time from the IMU reading just before it, then replay the
+        # buffered IMU samples up to the newest
+        t0 = min(meas.t_s, pre[-1][0])
+        before = [x for x in pre if x[0] <= t0]
+        mech.set_raw(before[-1][1], before[-1][2])
+        q0 = mech.carry_attitude(self._att_q, t0 - self._att_t_s)
+        mat_nb = quat_to_mat(q0)
+        vel = np.asarray(meas.vel_ned_mps, dtype=float)
+        vel_ok = np.isfinite(vel)
+        vel0 = np.where(vel_ok, vel, 0.0)
+        var_v = np.where(vel_ok, r_vel, cfg.init_vel_sigma_mps**2)
+        pos0 = meas.pos_ned_m - mat_nb @ self._gnss.lever_b_m + vel0 * (t0 - meas.t_s)
+        mech.initialise(t0, pos0, vel0, q0)
+        p = np.zeros((N_STATE, N_STATE))
+        p[0:3, 0:3] = np.diag(r_pos)
+        self._rx.fix_type = None  # the first fix starts the receiver-error model afresh
+        if self._gm:
+            # the first fix carries the receiver error b: position error = b + w,
+            # receiver-error state error = -b (the estimate starts at 0)
+            self._p = p
+            self._hist.clear()
+            self._follow_receiver_error(meas.fix_type, r_pos_l)
+            var = self._rx.var_ned_m2
+            p[0:3, 0:3] = np.diag(var + np.array(self._gnss.white_part(r_pos_l)))
+            p[0:3, IGB : IGB + 3] = -np.diag(var)
+            p[IGB : IGB + 3, 0:3] = -np.diag(var)
+        p[3:6, 3:6] = np.diag(var_v)
+        att_sig = np.array(cfg.init_att_sigma_rad if self._strapdown else cfg.att_err_sigma_rad)
+        p[6:9, 6:9] = np.diag(att_sig**2)
+        p[9:12, 9:12] = np.eye(3) * cfg.accel_bias_sigma_mps2**2
+        p[12:15, 12:15] = np.eye(3) * cfg.gyro_bias_sigma_radps**2
+        self._p = p
+        self._att_corr = (1.0, 0.0, 0.0, 0.0)
+        self._hist.clear()
+        self._hist.append(snapshot_of(mech, p))
+        self._init = True
+        self._last_fuse_t_s = meas.t_s
+        for t_s, acc, gyro in pre:
+            if t_s > t0:
+                mech.step(t_s, acc, gyro)
+                if mech.seg_dt_s >= cfg.cov_interval_s:
+                    self._close_segment()
+        pre.clear()
+        log.info("blend initialised at t=%.3f s (%s)", meas.t_s, cfg.mode)
+        gate3 = self._gates[3]
+        return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")
