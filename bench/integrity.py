@@ -61,16 +61,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.integrity.limits import CATEGORY_LIMITS, ApproachCategory  # noqa: E402
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor  # noqa: E402
-from companion.integrity.phase import PhaseConfig  # noqa: E402
-from companion.integrity.synthetic import (  # noqa: E402
-    ApproachSpec,
-    Fault,
-    run_approach,
-    run_samples,
-)
+from companion.integrity.protection.limits import CATEGORY_LIMITS, ApproachCategory  # noqa: E402
+from companion.integrity.protection.phase import PhaseConfig  # noqa: E402
 from companion.nav.navigator import NavState  # noqa: E402
+from companion.sim.integrity_approaches import ApproachSpec, Fault, run_approach  # noqa: E402
+from companion.sim.integrity_runs import run_samples  # noqa: E402
 
 FIELD_M = 110.0
 CAT = ApproachCategory.CAT_II
@@ -318,8 +314,8 @@ def ins_flight(
     """Simulate one approach with the fault of ``case`` (None: nominal) and run it."""
     import companion.sim as sim
     from companion.integrity.coast import CoastConfig
-    from companion.integrity.synthetic import run_samples_ins
     from companion.nav.blend import BlendConfig
+    from companion.sim.integrity_runs import run_samples_ins
     from companion.sim.scenarios import Event
 
     logging.disable(logging.WARNING)

@@ -1,7 +1,7 @@
 """The simulator's fault flights (S3's 4 cm/s ramp and 1 m dither) and the nominal flight.
 
 The monitor is driven with the flights' typed samples by
-:func:`companion.integrity.synthetic.run_samples` (pass-through navigator on the
+:func:`companion.sim.integrity_runs.run_samples` (pass-through navigator on the
 primary receiver, every fix to the monitor), independently of the engine.
 """
 
@@ -12,7 +12,7 @@ import pytest
 sim = pytest.importorskip("companion.sim")
 
 from companion.integrity.monitor import IntegrityMonitor  # noqa: E402
-from companion.integrity.synthetic import run_samples  # noqa: E402
+from companion.sim.integrity_runs import run_samples  # noqa: E402
 
 
 @pytest.mark.parametrize("name", ["ramp_fault", "dither_fault"])
@@ -46,8 +46,8 @@ def test_one_receiver_with_the_inertial_coast_catches_the_ramp_flight_before_1m(
     """S3's 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
     inertial coast's references catch it before it reaches 1 m; nothing before."""
     from companion.integrity.coast import CoastConfig
-    from companion.integrity.synthetic import run_samples_ins
     from companion.nav.blend import BlendConfig
+    from companion.sim.integrity_runs import run_samples_ins
 
     flight = sim.simulate(sim.make_scenario("ramp_fault", second_receiver=False), seed=1)
     (event,) = [e for e in flight.events if e.kind == "ramp"]

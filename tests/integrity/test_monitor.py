@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from companion.integrity.coast import CoastState
-from companion.integrity.limits import ApproachCategory, FlightPhase
+from companion.integrity.fde.separation import SeparationResult
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
-from companion.integrity.phase import PhaseConfig
-from companion.integrity.separation import SeparationResult
-from companion.integrity.synthetic import ApproachSpec, Fault, SyntheticReference, run_approach
+from companion.integrity.protection.limits import ApproachCategory, FlightPhase
+from companion.integrity.protection.phase import PhaseConfig
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.sim.integrity_approaches import ApproachSpec, Fault, SyntheticReference, run_approach
 from companion.types import (
     Alert,
     AlertCode,
@@ -378,20 +378,21 @@ def test_two_receivers_and_a_reference_exclude_the_ramping_receiver() -> None:
 
 
 def test_arbitration_needs_a_failed_test_against_a_third_solution() -> None:
-    mon = IntegrityMonitor(cat2_config())
+    attribution = IntegrityMonitor(cat2_config()).fde.attribution
+    pairs = attribution.pairs
     mk = lambda t, fail: SeparationResult(  # noqa: E731
         t, np.zeros(3), 40.0 if fail else 1.0, 35.4, np.zeros(3), math.nan, math.nan, 1, ()
     )
-    mon._now_s = 10.0
+    now = 10.0
     key = ("rx0", "rx1")
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) == 0
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, False), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # both consistent: nothing tells
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, True)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # both fail: the reference may be off
-    mon._pair_last = {("rx0", "ref:ins0"): mk(-5.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # stale evidence does not count
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) == 0
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, False), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # both consistent: nothing tells
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, True)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # both fail: the ref may be off
+    pairs.latest = {("rx0", "ref:ins0"): mk(-5.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # stale evidence does not count
 
 
 def test_a_reference_anchored_on_the_faulty_receiver_does_not_blame_the_good_one() -> None:
@@ -427,6 +428,6 @@ def test_a_fix_type_change_restarts_the_receivers_series() -> None:
                                 m.vel_var_ned_m2ps2, FixType.RTK_FLOAT, 0)  # fmt: skip
         mon.on_fix(fix(t), m, None, references={"ins0": coast_ref(t, np.zeros(3), 0.0)})
         if k == 49:
-            assert mon._pair_last[key].window_points == 50
+            assert mon.fde.pairs.latest[key].window_points == 50
     assert mon.stats["series_restarted_fix_type"] == 1
-    assert mon._pair_last[key].window_points == 10
+    assert mon.fde.pairs.latest[key].window_points == 10

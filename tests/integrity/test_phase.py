@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.integrity.limits import FlightPhase
-from companion.integrity.phase import PhaseClassifier, PhaseConfig
+from companion.integrity.protection.limits import FlightPhase
+from companion.integrity.protection.phase import PhaseClassifier, PhaseConfig
 from companion.types import LandedState
 
 FIELD = 110.0

@@ -8,10 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-from companion.integrity.separation import (
-    ReferenceDrift,
-    SeparationTracker,
-    _mahalanobis3,
+from companion.integrity.fde.separation import ReferenceDrift, SeparationTracker, _mahalanobis3
+from companion.integrity.fde.thresholds import (
     _tau_grid,
     curvature_residual_norm_s2,
     thresholds_for_times,

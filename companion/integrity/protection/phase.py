@@ -1,6 +1,6 @@
 """Flight phase from the navigation state: taxi, take-off, en-route, approach, landing.
 
-The phase decides which alert limit applies (:mod:`companion.integrity.limits`).
+The phase decides which alert limit applies (:mod:`companion.integrity.protection.limits`).
 Inputs are the published solution (height, ground speed, vertical speed) and,
 when the autopilot sends EXTENDED_SYS_STATE, its landed state. Height above the
 field is the altitude less the field elevation, which is configured or learned
@@ -24,8 +24,9 @@ References
 ----------
 ICAO Doc 8168 (PANS-OPS): decision heights 200 ft CAT I, 100 ft CAT II;
 the terminal area below 1500 ft above the aerodrome for approach/departure.
-SEEDS.md S0 (requirements per flight phase), S1 (take-off and landing as the
-hardest phases).
+Grzegorzewski (2005), "Navigating by a position potential in 3-D" (requirements
+per flight phase); El-Mowafy (2005), RTK networks for precision approach with an
+adaptive GPS/INS blend (take-off and landing as the hardest phases).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.integrity.limits import FlightPhase
+from companion.integrity.protection.limits import FlightPhase
 from companion.types import FloatArray, LandedState
 
 FT_M = 0.3048
