@@ -38,6 +38,7 @@ from scipy.stats import chi2
 from companion.integrity.coast import CoastState
 from companion.integrity.monitor import IntegrityMonitor
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.ranges import check_ranges, ranged
 from companion.sim.integrity_runs import is_alarm
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
 from companion.types import (
@@ -51,6 +52,7 @@ from companion.types import (
 )
 
 FAULT_KINDS = ("step", "ramp", "dither")
+USABLE_GNSS_MODES = tuple(mode for mode in GNSS_MODE_SPECS if mode != "none")
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,30 +105,24 @@ class Fault:
 class ApproachSpec:
     """One synthetic approach."""
 
-    duration_s: float = 115.0
-    speed_mps: float = 70.0
+    duration_s: float = ranged(115.0, gt=0.0)
+    speed_mps: float = ranged(70.0, gt=0.0)
     glide_deg: float = 3.0
     start_height_m: float = 440.0
     field_elevation_msl_m: float = 110.0
-    gnss_mode: str = "rtk_fixed"
-    rate_hz: float = 10.0
-    receivers: int = 2
+    gnss_mode: str = ranged("rtk_fixed", choices=USABLE_GNSS_MODES)
+    rate_hz: float = ranged(10.0, gt=0.0)
+    receivers: int = ranged(2, choices=(1, 2))
     vel_wander_h_mps: float = 1.0
     vel_wander_v_mps: float = 0.3
-    vel_wander_tau_s: float = 10.0
+    vel_wander_tau_s: float = ranged(10.0, gt=0.0)
     fuse_all: bool = False
     """False: the navigator fuses the first receiver not excluded (the primary; the other is
     the independent solution); True: it fuses every receiver not excluded."""
     faults: tuple[Fault, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
-        if self.gnss_mode not in GNSS_MODE_SPECS or self.gnss_mode == "none":
-            raise ValueError("gnss_mode must be a usable GNSS mode")
-        if self.receivers not in (1, 2):
-            raise ValueError("receivers must be 1 or 2")
-        for name in ("duration_s", "speed_mps", "rate_hz", "vel_wander_tau_s"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0")
+        check_ranges(self)
 
 
 class CvKalman:

@@ -90,7 +90,7 @@ def alerts(outs: list[object], code: AlertCode) -> list[Alert]:
     ],
 )
 def test_config_validation(kwargs: dict[str, object]) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
         IntegrityConfig(**kwargs)  # type: ignore[arg-type]
 
 

@@ -68,5 +68,5 @@ def test_non_finite_state_keeps_the_phase() -> None:
     ],
 )
 def test_config_validation(kwargs: dict[str, float]) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
         PhaseConfig(**kwargs)
