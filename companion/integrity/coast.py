@@ -1,8 +1,10 @@
 """An inertial coasting reference for solution separation: INS predictions free of recent fixes.
 
-Solution separation (S3) needs solutions that do not share the fault under test.
-With one receiver the navigator is no such solution: it fuses the receiver and
-follows a slow ramp. :class:`InertialCoast` supplies one. It integrates the
+Solution separation (Kim, Walter and Powell) needs solutions that do not share the
+fault under test. With one receiver the navigator is no such solution: it fuses
+the receiver and follows a slow ramp. :class:`InertialCoast` supplies one: the
+fault detector (:mod:`companion.integrity.fde.pairs`) separates each receiver
+from every slot's prediction. It integrates the
 IMU's specific force, rotated to NED by the autopilot's attitude, plus normal
 gravity, as cumulative increments ``V(t) = int a dt`` and ``P(t) = int V dt``
 with a short history, so that they can be read at a GNSS fix's (older) time of
@@ -41,11 +43,14 @@ Pure: no I/O, no clock; time is the samples' ``t_s``.
 
 References
 ----------
-SEEDS.md S3 (solution separation between independent solutions), S1 (tactical
-IMU grade), S2 (the measured specific force as the motion model). Titterton &
-Weston, Strapdown Inertial Navigation Technology, 2nd ed., eq. 12.20-12.22 (the
-psi-angle error model: dv error = [f x] psi - C dba). Groves, Principles of
-GNSS, inertial and multisensor navigation, sec. 4.4 (IMU error model).
+Kim, Walter and Powell, "Standalone GPS-based flight inspection system" (solution
+separation between independent solutions). El-Mowafy (2005), RTK networks for
+precision approach with an adaptive GPS/INS blend (tactical IMU grade).
+"Tracking with the aircraft's kinematic and dynamic parameters" (the measured
+specific force as the motion model). Titterton & Weston, Strapdown Inertial
+Navigation Technology, 2nd ed., eq. 12.20-12.22 (the psi-angle error model:
+dv error = [f x] psi - C dba). Groves, Principles of GNSS, inertial and
+multisensor navigation, sec. 4.4 (IMU error model). ``docs/methods.md``.
 """
 
 from __future__ import annotations

@@ -40,6 +40,7 @@ from companion.integrity.monitor import IntegrityMonitor
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.ranges import check_ranges, ranged
 from companion.sim.integrity_runs import is_alarm
+from companion.sim.scenarios import Event
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
 from companion.types import (
     Alert,
@@ -91,6 +92,22 @@ class Fault:
             return on * vec * np.maximum(tau, 0.0)[:, None]
         axis = vec / np.linalg.norm(vec)
         return on * self.amplitude_m * np.sin(2.0 * math.pi * tau / self.period_s)[:, None] * axis
+
+    def as_event(self, t_end_s: float) -> Event:
+        """The same fault as the simulator's event on ``[t_start_s, t_end_s)``
+        (:mod:`companion.sim.scenarios`: step ``offset_ned_m``, ramp ``rate_ned_mps``,
+        dither ``amplitude_m``, ``period_s``, ``axis_ned``)."""
+        params: dict[str, object]
+        if self.kind == "dither":
+            params = {
+                "amplitude_m": self.amplitude_m,
+                "period_s": self.period_s,
+                "axis_ned": self.vector_ned,
+            }
+        else:
+            key = "offset_ned_m" if self.kind == "step" else "rate_ned_mps"
+            params = {key: self.vector_ned}
+        return Event(self.kind, self.t_start_s, t_end_s, self.receiver_id, params)
 
     def size_m(self, t_s: float) -> float:
         """Magnitude of the offset at ``t_s``, m (for a dither: its amplitude once started)."""

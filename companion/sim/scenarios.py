@@ -13,16 +13,25 @@ Event kinds (``Event.kind``), all on the autopilot clock ``t_s``:
                  after the window RTK float for ``refix_s``, then fixed again
 ``downgrade``    the fix is ``mode`` ("rtk_float", "dgps", "3d", "none") in the window
 ``stale``        the receiver repeats its last fix (position, velocity, fix type,
-                 accuracies) with a fresh time stamp while the aircraft moves (S0)
+                 accuracies) with a fresh time stamp while the aircraft moves
 ``step``         ``offset_ned_m`` added to the reported position
-``ramp``         ``rate_ned_mps * (t - t_start)`` added (S3: e.g. 4 cm/s)
+``ramp``         ``rate_ned_mps * (t - t_start)`` added (e.g. 4 cm/s)
 ``dither``       ``amplitude_m * sin(2 pi (t - t_start) / period_s) * axis_ned``
-                 added (S3: e.g. 1 m)
+                 added (e.g. 1 m)
+
+The catalogue's one-line descriptions are written into each flight's JSON
+sidecar (and the committed fixtures'): they are output, their parenthesised
+source tags included, and stay as they are; the sources are cited below.
 
 References
 ----------
-SEEDS.md S0 (stale fixes), S1 (RTK outages, accuracies), S3 (ramp and dither
-faults), S4 (taxi with heading error, straight legs, GNSS speed noise).
+Grzegorzewski (2005), "Navigating by a position potential in 3-D" (stale fixes).
+El-Mowafy (2005), RTK networks for precision approach with an adaptive GPS/INS
+blend (RTK outages, accuracies). Kim, Walter and Powell, "Standalone GPS-based
+flight inspection system" (ramp and dither faults: 4 cm/s, 1 m). Markelov et
+al., "INS course correction from satellite navigation before take-off" (taxi
+with a heading error, straight legs, GNSS speed noise). ``docs/replay.md``
+(the fixtures).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The simulator's fault flights (S3's 4 cm/s ramp and 1 m dither) and the nominal flight.
+"""The simulator's fault flights (a 4 cm/s ramp and a 1 m dither, after Kim, Walter and
+Powell) and the nominal flight.
 
 The monitor is driven with the flights' typed samples by
 :func:`companion.sim.integrity_runs.run_samples` (pass-through navigator on the
@@ -30,7 +31,7 @@ def test_fault_flight_is_detected_and_alerted_before_1m(name: str) -> None:
     dt = t_alert - event.t_start_s
     if name == "ramp_fault":
         rate = abs(event.params["rate_ned_mps"][2])
-        assert rate * dt < 1.0  # S3: caught before it reaches 1 m
+        assert rate * dt < 1.0  # caught before it reaches 1 m
     else:
         assert dt < 5.0
 
@@ -43,7 +44,7 @@ def test_nominal_flight_raises_no_fault_or_integrity_alert() -> None:
 
 
 def test_one_receiver_with_the_inertial_coast_catches_the_ramp_flight_before_1m() -> None:
-    """S3's 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
+    """A 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
     inertial coast's references catch it before it reaches 1 m; nothing before."""
     from companion.integrity.coast import CoastConfig
     from companion.nav.blend import BlendConfig

@@ -284,6 +284,25 @@ def test_1m_dither_caught_where_the_plain_test_is_blind() -> None:
     assert res.baseline_first_s is None
 
 
+@pytest.mark.parametrize(
+    "fault",
+    [
+        Fault("step", 40.0, (1.0, 0.0, -2.0)),
+        Fault("ramp", 40.0, (0.0, 0.03, 0.04)),
+        Fault("dither", 40.0, (0.0, 0.0, 2.0), amplitude_m=1.0, period_s=20.0),
+    ],
+    ids=["step", "ramp", "dither"],
+)
+def test_a_fault_as_a_simulator_event_offsets_the_fixes_the_same(fault: Fault) -> None:
+    from companion.sim import make_scenario
+    from companion.sim.sensors import fault_offset_ned_m
+
+    sc = make_scenario("approach", events=(fault.as_event(1000.0),))
+    times = np.array([39.9, 40.0, 45.3, 61.0])
+    got = np.array([fault_offset_ned_m(sc, 0, float(t)) for t in times])
+    np.testing.assert_allclose(got, fault.offset_ned_m(times), rtol=0.0, atol=1e-12)
+
+
 def test_ramp_on_a_navigator_fusing_both_receivers_is_not_pinned_on_the_good_one() -> None:
     res = run((Fault("ramp", 40.0, (0.0, 0.0, 0.04)),), fuse_all=True)
     assert res.first_alert_s is not None and 0.04 * (res.first_alert_s - 40.0) < 1.0

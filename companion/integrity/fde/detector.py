@@ -155,7 +155,7 @@ class FaultDetector:
         meas : the same fix in the local NED frame.
         update : what the navigator did with it (its innovation chi-square), or None
             when it was not offered (e.g. the receiver is excluded).
-        predicted : the potential filter's prediction at the fix time, or None.
+        predicted : the position-potential filter's prediction at the fix time, or None.
         references : independent solutions at (about) the fix time, by name.
         """
         t = meas.t_s
