@@ -6,7 +6,7 @@ nominal flight; defaults 20 and 10). Progress goes to stderr; the table to stdou
 What runs (all seeded): synthetic 3 deg approaches (115 s, 70 m/s, from 440 m
 to 15 m above the field) with a wandering velocity, two RTK-fixed receivers at
 10 Hz with the simulator's Gauss-Markov error model
-(:mod:`companion.integrity.synthetic`), CAT II required (VAL 5.4 m, HAL 17 m,
+(:mod:`companion.sim.integrity_approaches`), CAT II required (VAL 5.4 m, HAL 17 m,
 TTA 2 s / 1 s objective). The navigator (a constant-velocity Kalman filter)
 fuses the primary receiver (the first not excluded); the second receiver is
 the independent solution. A fault is injected on receiver 0 at a random time
@@ -14,7 +14,8 @@ the independent solution. A fault is injected on receiver 0 at a random time
 along the limit's axis). The same fixes go, in the same run, to
 
 * **monitor**: :class:`companion.integrity.monitor.IntegrityMonitor` (FDE,
-  separation with S3's slope and residual tests, protection levels);
+  separation with Kim, Walter and Powell's slope and residual tests, protection
+  levels);
 * **plain**: an innovation-only chi-square monitor on a navigator with the same
   fusion policy and no exclusion (alarm at each onset of NIS above
   chi2^-1(1 - P_fa, 3), the same P_fa).
@@ -26,9 +27,9 @@ faults: they exercise the fix-level tests, the separation snapshot, slope and
 residual tests on the receiver pair, the phase logic (approach, landing) and
 the protection levels against CAT II limits, but not the INS or take-off/taxi.
 The end of the run replays the simulator's ramp_fault, dither_fault and
-nominal flights (S3 cases) through the monitor.
+nominal flights (the paper's ramp and dither) through the monitor.
 
-**With an inertial reference** (issue 6; ``--ins-runs N`` per case, default 3,
+**With an inertial reference** (``--ins-runs N`` per case, default 3,
 ``--ins-hours H`` of nominal flight per row, default 0.5, ``--jobs J`` processes,
 default 2; the defaults keep the whole bench near 15 min on 2 cores, each
 simulated flight through the blend costs seconds): simulated approaches
@@ -38,7 +39,7 @@ GNSS/INS blend (:class:`companion.nav.blend.BlendNavigator`) with the inertial
 coast (:class:`companion.integrity.coast.InertialCoast`, 6 slots over 30 s,
 anchored from the blend with its accelerometer-bias estimate, not while a fault
 is reported) giving references to the monitor
-(:func:`companion.integrity.synthetic.run_samples_ins`). The fault (same kinds
+(:func:`companion.sim.integrity_runs.run_samples_ins`). The fault (same kinds
 and sizes, plus vertical- and horizontal-only 4 cm/s ramps) is injected on
 receiver 0 at a random time 40-80 s into the glide, in a random direction.
 Rows: one receiver with a tactical IMU (beside the same flights without the
@@ -61,16 +62,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.integrity.limits import CATEGORY_LIMITS, ApproachCategory  # noqa: E402
+import companion.sim as sim  # noqa: E402
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor  # noqa: E402
-from companion.integrity.phase import PhaseConfig  # noqa: E402
-from companion.integrity.synthetic import (  # noqa: E402
-    ApproachSpec,
-    Fault,
-    run_approach,
-    run_samples,
-)
+from companion.integrity.protection.limits import CATEGORY_LIMITS, ApproachCategory  # noqa: E402
+from companion.integrity.protection.phase import PhaseConfig  # noqa: E402
 from companion.nav.navigator import NavState  # noqa: E402
+from companion.sim.integrity_approaches import ApproachSpec, Fault, run_approach  # noqa: E402
+from companion.sim.integrity_runs import run_samples  # noqa: E402
 
 FIELD_M = 110.0
 CAT = ApproachCategory.CAT_II
@@ -86,6 +84,15 @@ class Case:
     size: float
     axis: str  # "random", "vertical", "horizontal"
     at_limit: bool = False
+
+    def fault(self, t_start_s: float, direction_ned: np.ndarray) -> Fault:
+        """This case's fault on receiver 0 from ``t_start_s`` along a unit direction (a
+        dither: ``size`` is its amplitude, 20 s period)."""
+        if self.kind == "dither":
+            return Fault(
+                "dither", t_start_s, tuple(direction_ned), amplitude_m=self.size, period_s=20.0
+            )
+        return Fault(self.kind, t_start_s, tuple(direction_ned * self.size))
 
 
 CASES = [
@@ -187,11 +194,7 @@ def run_case(case: Case, runs: int, receivers: int, seed: int) -> tuple[Tally, T
     rng = np.random.default_rng(seed)
     for _ in range(runs):
         t0 = float(rng.uniform(20.0, 45.0))
-        vec = direction(rng, case.axis)
-        if case.kind == "dither":
-            fault = Fault("dither", t0, tuple(vec), amplitude_m=case.size, period_s=20.0)
-        else:
-            fault = Fault(case.kind, t0, tuple(vec * case.size))
+        fault = case.fault(t0, direction(rng, case.axis))
         spec = ApproachSpec(receivers=receivers, faults=(fault,))
         res = run_approach(spec, monitor, rng, t_from_s=t0)
         mine.add(fault, res.first_alert_s, res.first_alert_text)
@@ -243,11 +246,6 @@ def nominal(hours: float, seed: int) -> tuple[float, int, int, dict[str, int]]:
 
 
 def sim_flights() -> None:
-    try:
-        import companion.sim as sim
-    except ImportError:  # the simulator is optional for this bench
-        print("\n(simulator not available: flight replays skipped)")
-        return
     print("\nSimulator flights (seed 1), monitor on the typed samples, pass-through navigator")
     print(f"{'flight':<14} {'fault':<32} {'first alarm':>12} {'delay s':>8} {'size m':>7} alarms")
     for name in ("ramp_fault", "dither_fault", "nominal"):
@@ -316,10 +314,9 @@ def ins_flight(
     case: Case | None, grade: str, receivers: int, seed: int, baseline: bool
 ) -> InsOutcome:
     """Simulate one approach with the fault of ``case`` (None: nominal) and run it."""
-    import companion.sim as sim
     from companion.integrity.coast import CoastConfig
-    from companion.integrity.synthetic import run_samples_ins
     from companion.nav.blend import BlendConfig
+    from companion.sim.integrity_runs import run_samples_ins
     from companion.sim.scenarios import Event
 
     logging.disable(logging.WARNING)
@@ -329,19 +326,8 @@ def ins_flight(
     t0 = 0.0
     if case is not None:
         t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
-        vec = direction(rng, case.axis)
-        if case.kind == "dither":
-            fault = Fault("dither", t0, tuple(vec), amplitude_m=case.size, period_s=20.0)
-            params: dict[str, object] = {
-                "amplitude_m": case.size,
-                "period_s": 20.0,
-                "axis_ned": tuple(vec),
-            }
-        else:
-            fault = Fault(case.kind, t0, tuple(vec * case.size))
-            key = "offset_ned_m" if case.kind == "step" else "rate_ned_mps"
-            params = {key: tuple(vec * case.size)}
-        events = (Event(case.kind, t0, t0 + 1000.0, params=params),)
+        fault = case.fault(t0, direction(rng, case.axis))
+        events = (fault.as_event(t0 + 1000.0),)
     scenario = sim.make_scenario(
         "approach", imu_grade=grade, events=events, second_receiver=receivers == 2
     )
@@ -445,7 +431,6 @@ def ins_sections(runs: int, hours: float, jobs: int, seed: int) -> None:
 def coast_timing() -> None:
     """Per-call cost of the inertial coast and of the monitor's separation with its
     references, on a simulated tactical approach's samples (best of 3 passes)."""
-    import companion.sim as sim
     from companion.integrity.coast import CoastConfig, InertialCoast
     from companion.nav import earth
     from companion.nav.navigator import GnssMeasurement

@@ -45,7 +45,7 @@ from pymavlink.dialects.v20 import ardupilotmega
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from companion.integrity.limits import CATEGORY_ACCURACY, ApproachCategory
+from companion.integrity import CATEGORY_ACCURACY, ApproachCategory
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.gnss import gnss_measurement

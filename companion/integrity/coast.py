@@ -1,8 +1,10 @@
 """An inertial coasting reference for solution separation: INS predictions free of recent fixes.
 
-Solution separation (S3) needs solutions that do not share the fault under test.
-With one receiver the navigator is no such solution: it fuses the receiver and
-follows a slow ramp. :class:`InertialCoast` supplies one. It integrates the
+Solution separation (Kim, Walter and Powell) needs solutions that do not share the
+fault under test. With one receiver the navigator is no such solution: it fuses
+the receiver and follows a slow ramp. :class:`InertialCoast` supplies one: the
+fault detector (:mod:`companion.integrity.fde.pairs`) separates each receiver
+from every slot's prediction. It integrates the
 IMU's specific force, rotated to NED by the autopilot's attitude, plus normal
 gravity, as cumulative increments ``V(t) = int a dt`` and ``P(t) = int V dt``
 with a short history, so that they can be read at a GNSS fix's (older) time of
@@ -41,11 +43,14 @@ Pure: no I/O, no clock; time is the samples' ``t_s``.
 
 References
 ----------
-SEEDS.md S3 (solution separation between independent solutions), S1 (tactical
-IMU grade), S2 (the measured specific force as the motion model). Titterton &
-Weston, Strapdown Inertial Navigation Technology, 2nd ed., eq. 12.20-12.22 (the
-psi-angle error model: dv error = [f x] psi - C dba). Groves, Principles of
-GNSS, inertial and multisensor navigation, sec. 4.4 (IMU error model).
+Kim, Walter and Powell, "Standalone GPS-based flight inspection system" (solution
+separation between independent solutions). El-Mowafy (2005), RTK networks for
+precision approach with an adaptive GPS/INS blend (tactical IMU grade).
+"Tracking with the aircraft's kinematic and dynamic parameters" (the measured
+specific force as the motion model). Titterton & Weston, Strapdown Inertial
+Navigation Technology, 2nd ed., eq. 12.20-12.22 (the psi-angle error model:
+dv error = [f x] psi - C dba). Groves, Principles of GNSS, inertial and
+multisensor navigation, sec. 4.4 (IMU error model). ``docs/methods.md``.
 """
 
 from __future__ import annotations
@@ -61,6 +66,7 @@ import numpy as np
 from companion.nav import earth
 from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
 from companion.nav.navigator import NavState
+from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
 log = logging.getLogger(__name__)
@@ -108,49 +114,36 @@ class CoastConfig:
     :meth:`for_grade` rather than typing them.
     """
 
-    slots: int = 6
+    slots: int = ranged(6, ge=1, le=16)
     """Number of staggered anchor slots. A fault that starts at ``t`` is seen by the slots
     anchored before ``t`` until they re-anchor; the youngest of them (at most
     ``life_s / slots`` old at ``t``, so the most accurate) lasts ``life_s (1 - 1/slots)``
     more: more slots give a younger, sharper reference that still outlives detection."""
-    life_s: float = 30.0
+    life_s: float = ranged(30.0, gt=0.0)
     """A slot is re-anchored this long after its last anchor; slots are staggered by
     ``life_s / slots``, so the oldest is always at least ``life_s (1 - 1/slots)`` old
     (25 s by default: older than the monitor's 10 s window). Beyond about 30 s a
     tactical-grade slot's vertical sigma exceeds 15 cm and it no longer sharpens the
     tests (measured on the simulator's approaches: 6 slots over 30 s caught 5 of 6
     vertical 4 cm/s ramps before 0.6 m, 6 over 60 s caught 3)."""
-    history_s: float = 2.0
+    history_s: float = ranged(2.0, gt=0.0)
     """Length of the increment history: the oldest fix time a reference can be given at, s."""
-    max_imu_gap_s: float = 0.5
+    max_imu_gap_s: float = ranged(0.5, gt=0.0)
     """An IMU gap longer than this breaks the integration: every slot is dropped, s."""
-    acc_bias_sigma_mps2: float = math.hypot(0.3e-3, 0.05e-3) * 9.80665
+    acc_bias_sigma_mps2: float = ranged(math.hypot(0.3e-3, 0.05e-3) * 9.80665, ge=0.0)
     """Accelerometer bias 1-sigma per axis when the anchor gives no estimate (turn-on and
     instability combined), m/s^2."""
-    acc_vrw_mps_rts: float = 0.03 / 60.0
+    acc_vrw_mps_rts: float = ranged(0.03 / 60.0, ge=0.0)
     """Accelerometer white noise (velocity random walk), m/s/sqrt(s)."""
-    att_err_sigma_rad: tuple[float, float, float] = (
-        math.radians(0.01),
-        math.radians(0.01),
-        math.radians(0.02),
+    att_err_sigma_rad: tuple[float, float, float] = ranged(
+        (math.radians(0.01), math.radians(0.01), math.radians(0.02)), ge=0.0, length=3
     )
     """The autopilot's attitude error 1-sigma about roll, pitch, yaw axes, rad."""
 
     def __post_init__(self) -> None:
-        if not isinstance(self.slots, int) or not 1 <= self.slots <= 16:
-            raise ValueError("slots must be an integer in [1, 16]")
-        for name in ("life_s", "history_s", "max_imu_gap_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0")
-        for name in ("acc_bias_sigma_mps2", "acc_vrw_mps_rts"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0")
-        if len(self.att_err_sigma_rad) != 3 or not all(
-            math.isfinite(c) and c >= 0.0 for c in self.att_err_sigma_rad
-        ):
-            raise ValueError("att_err_sigma_rad must be 3 finite numbers >= 0")
+        check_ranges(self)
+        if not isinstance(self.slots, int):
+            raise ValueError(f"slots must be an integer, got {self.slots!r}")
 
     @classmethod
     def for_grade(cls, grade: str, **overrides: object) -> CoastConfig:

@@ -4,6 +4,20 @@
 ``simulate(scenario, seed)`` flies it and returns a :class:`SimFlight` (truth,
 typed samples, MAVLink messages); ``write_scenario`` writes the .tlog, the truth
 CSV and the JSON sidecar that ``companion simulate`` produces.
+
+* :mod:`~companion.sim.scenarios` — what to fly, scheduled events, the named catalogue;
+* :mod:`~companion.sim.trajectory` — the smooth flight path from a phase script;
+* :mod:`~companion.sim.sensors` — IMU, GNSS and attitude error models;
+* :mod:`~companion.sim.autopilot` — the autopilot's MAVLink messages and their samples;
+* :mod:`~companion.sim.flight` — :func:`simulate`;
+* :mod:`~companion.sim.writer` — the .tlog, truth CSV and sidecar;
+* :mod:`~companion.sim.costs` — what an integer IMU message costs a free-running INS;
+* :mod:`~companion.sim.integrity_approaches`, :mod:`~companion.sim.integrity_runs` —
+  the integrity monitor on synthetic approaches and on simulated flights (tests and
+  ``bench/integrity.py``).
+
+A tool layer above the core: it may import the navigation and integrity
+packages; nothing in them imports it. ``docs/replay.md`` (the fixtures).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ only the IMU samples, and reports the position and heading errors at the end.
 References
 ----------
 Titterton & Weston, Strapdown Inertial Navigation Technology, 2nd ed., ch. 3
-(quaternion attitude update); DESIGN.md (RAW_IMU mG, mrad/s; HIGHRES_IMU SI).
+(quaternion attitude update); ``docs/mavlink.md`` (RAW_IMU mG, mrad/s; HIGHRES_IMU SI).
 """
 
 from __future__ import annotations

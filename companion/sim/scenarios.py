@@ -13,16 +13,25 @@ Event kinds (``Event.kind``), all on the autopilot clock ``t_s``:
                  after the window RTK float for ``refix_s``, then fixed again
 ``downgrade``    the fix is ``mode`` ("rtk_float", "dgps", "3d", "none") in the window
 ``stale``        the receiver repeats its last fix (position, velocity, fix type,
-                 accuracies) with a fresh time stamp while the aircraft moves (S0)
+                 accuracies) with a fresh time stamp while the aircraft moves
 ``step``         ``offset_ned_m`` added to the reported position
-``ramp``         ``rate_ned_mps * (t - t_start)`` added (S3: e.g. 4 cm/s)
+``ramp``         ``rate_ned_mps * (t - t_start)`` added (e.g. 4 cm/s)
 ``dither``       ``amplitude_m * sin(2 pi (t - t_start) / period_s) * axis_ned``
-                 added (S3: e.g. 1 m)
+                 added (e.g. 1 m)
+
+The catalogue's one-line descriptions are written into each flight's JSON
+sidecar (and the committed fixtures'): they are output, their parenthesised
+source tags included, and stay as they are; the sources are cited below.
 
 References
 ----------
-SEEDS.md S0 (stale fixes), S1 (RTK outages, accuracies), S3 (ramp and dither
-faults), S4 (taxi with heading error, straight legs, GNSS speed noise).
+Grzegorzewski (2005), "Navigating by a position potential in 3-D" (stale fixes).
+El-Mowafy (2005), RTK networks for precision approach with an adaptive GPS/INS
+blend (RTK outages, accuracies). Kim, Walter and Powell, "Standalone GPS-based
+flight inspection system" (ramp and dither faults: 4 cm/s, 1 m). Markelov et
+al., "INS course correction from satellite navigation before take-off" (taxi
+with a heading error, straight legs, GNSS speed noise). ``docs/replay.md``
+(the fixtures).
 """
 
 from __future__ import annotations
@@ -35,6 +44,7 @@ from types import MappingProxyType
 from typing import Any
 
 from companion.nav.frames import LocalFrame
+from companion.ranges import check_ranges, ranged
 from companion.sim.trajectory import ScriptBuilder
 from companion.types import AutopilotFlavour
 
@@ -92,60 +102,60 @@ class Scenario:
     """Everything that defines a simulated flight (SI units unless the name says deg)."""
 
     name: str
-    profile: str = "fixed_wing"
-    flight: str = "full"
+    profile: str = ranged("fixed_wing", choices=PROFILES)
+    flight: str = ranged("full", choices=FLIGHTS)
     flavour: AutopilotFlavour = AutopilotFlavour.ARDUPILOT
-    duration_s: float | None = None
+    duration_s: float | None = ranged(None, gt=0.0, optional=True)
     """None: the script's natural length; shorter truncates, longer holds the last state."""
-    imu_grade: str = "mems"
-    imu_message: str = "RAW_IMU"
-    imu_rate_hz: float = 50.0
-    attitude_rate_hz: float = 25.0
-    gnss_rate_hz: float = 10.0
-    gnss_latency_s: float = 0.08
-    gnss_mode: str = "rtk_fixed"
-    gnss_vel_noise_mps: float = 0.05
-    heading_error_deg: float = 0.0
-    crab_deg: float = 0.0
-    wind_ned_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    imu_grade: str = ranged("mems", choices=IMU_GRADES)
+    imu_message: str = ranged("RAW_IMU", choices=IMU_MESSAGES)
+    imu_rate_hz: float = ranged(50.0, gt=0.0, le=1000.0)
+    attitude_rate_hz: float = ranged(25.0, gt=0.0, le=400.0)
+    gnss_rate_hz: float = ranged(10.0, gt=0.0, le=50.0)
+    gnss_latency_s: float = ranged(0.08, ge=0.0, lt=1.0)
+    gnss_mode: str = ranged("rtk_fixed", choices=GNSS_MODES)
+    gnss_vel_noise_mps: float = ranged(0.05, ge=0.0, lt=10.0)
+    heading_error_deg: float = ranged(0.0, ge=-180.0, le=180.0)
+    crab_deg: float = ranged(0.0, gt=-45.0, lt=45.0)
+    wind_ned_mps: tuple[float, float, float] = ranged((0.0, 0.0, 0.0), gt=-60.0, lt=60.0, length=3)
     second_receiver: bool = False
     noise: bool = True
     events: tuple[Event, ...] = ()
     # geometry
-    lat0_deg: float = 52.1650
+    lat0_deg: float = ranged(52.1650, gt=-85.0, lt=85.0)
     lon0_deg: float = 20.9670
     alt0_m: float = 110.0
     geoid_undulation_m: float = 33.5
     stand_heading_deg: float = 0.0
-    parked_s: float = 30.0
-    taxi_speed_mps: float = 8.0
+    parked_s: float = ranged(30.0, gt=0.0, le=3600.0)
+    taxi_speed_mps: float = ranged(8.0, gt=0.0, le=30.0)
     taxi_legs: tuple[tuple[float, float], ...] = ((300.0, 90.0), (450.0, -90.0), (250.0, 45.0))
     """(straight length m, turn deg after it) pairs; positive turns to the right."""
-    taxi_turn_rate_dps: float = 8.0
+    taxi_turn_rate_dps: float = ranged(8.0, gt=0.0, le=45.0)
     lineup_turn_deg: float = 90.0
-    cruise_alt_m: float = 300.0
+    cruise_alt_m: float = ranged(300.0, gt=0.0, le=15000.0)
     """Height above the airfield, m."""
-    cruise_speed_mps: float = 40.0
-    cruise_s: float = 240.0
+    cruise_speed_mps: float = ranged(40.0, gt=0.0, le=300.0)
+    cruise_s: float = ranged(240.0, gt=0.0, le=36000.0)
     cruise_turns_deg: tuple[float, ...] = (180.0, -90.0, 180.0)
-    bank_deg: float = 20.0
-    approach_speed_mps: float = 33.0
-    approach_alt_m: float = 250.0
-    glide_deg: float = 3.0
+    bank_deg: float = ranged(20.0, gt=0.0, le=45.0)
+    approach_speed_mps: float = ranged(33.0, gt=0.0, le=300.0)
+    approach_alt_m: float = ranged(250.0, gt=0.0, le=5000.0)
+    glide_deg: float = ranged(3.0, gt=0.0, le=10.0)
     # timing of the record
-    t_boot0_s: float = 10.0
+    t_boot0_s: float = ranged(10.0, gt=0.0, le=1e6)
     epoch0_s: float = 1_768_471_200.0
     """UNIX time of autopilot boot (2026-01-15 10:00 UTC): fixed, no clock is read."""
-    truth_rate_hz: float = 10.0
+    truth_rate_hz: float = ranged(10.0, gt=0.0, le=1000.0)
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> ValueError:
             return ValueError(f"scenario {self.name!r}: {msg}")
 
-        if self.profile not in PROFILES:
-            raise bad(f"profile must be one of {PROFILES}")
-        if self.flight not in FLIGHTS:
-            raise bad(f"flight must be one of {FLIGHTS}")
+        try:
+            check_ranges(self)
+        except ValueError as exc:
+            raise bad(str(exc)) from None
         if self.profile == "rotorcraft" and self.flight != "full":
             raise bad("the rotorcraft profile has only the 'full' flight")
         if (
@@ -153,48 +163,6 @@ class Scenario:
             or self.flavour is AutopilotFlavour.UNKNOWN
         ):
             raise bad("flavour must be AutopilotFlavour.ARDUPILOT or PX4")
-        if self.imu_grade not in IMU_GRADES:
-            raise bad(f"imu_grade must be one of {IMU_GRADES}")
-        if self.imu_message not in IMU_MESSAGES:
-            raise bad(f"imu_message must be one of {IMU_MESSAGES}")
-        if self.gnss_mode not in GNSS_MODES:
-            raise bad(f"gnss_mode must be one of {GNSS_MODES}")
-        positive = {
-            "imu_rate_hz": (self.imu_rate_hz, 1000.0),
-            "attitude_rate_hz": (self.attitude_rate_hz, 400.0),
-            "gnss_rate_hz": (self.gnss_rate_hz, 50.0),
-            "truth_rate_hz": (self.truth_rate_hz, 1000.0),
-            "taxi_speed_mps": (self.taxi_speed_mps, 30.0),
-            "taxi_turn_rate_dps": (self.taxi_turn_rate_dps, 45.0),
-            "cruise_speed_mps": (self.cruise_speed_mps, 300.0),
-            "approach_speed_mps": (self.approach_speed_mps, 300.0),
-            "cruise_alt_m": (self.cruise_alt_m, 15000.0),
-            "approach_alt_m": (self.approach_alt_m, 5000.0),
-            "cruise_s": (self.cruise_s, 36000.0),
-            "parked_s": (self.parked_s, 3600.0),
-            "glide_deg": (self.glide_deg, 10.0),
-            "bank_deg": (self.bank_deg, 45.0),
-            "t_boot0_s": (self.t_boot0_s, 1e6),
-        }
-        for key, (val, hi) in positive.items():
-            if not (math.isfinite(val) and 0.0 < val <= hi):
-                raise bad(f"{key} must be in (0, {hi}], got {val}")
-        if self.duration_s is not None and not (
-            math.isfinite(self.duration_s) and self.duration_s > 0.0
-        ):
-            raise bad(f"duration_s must be positive, got {self.duration_s}")
-        checks = {
-            "gnss_latency_s": 0.0 <= self.gnss_latency_s < 1.0,
-            "gnss_vel_noise_mps": 0.0 <= self.gnss_vel_noise_mps < 10.0,
-            "heading_error_deg": abs(self.heading_error_deg) <= 180.0,
-            "crab_deg": abs(self.crab_deg) < 45.0,
-            "lat0_deg": abs(self.lat0_deg) < 85.0,
-            "wind_ned_mps": len(self.wind_ned_mps) == 3
-            and all(math.isfinite(w) and abs(w) < 60.0 for w in self.wind_ned_mps),
-        }
-        for key, ok in checks.items():
-            if not ok:
-                raise bad(f"{key} out of range: {getattr(self, key)!r}")
         for length, turn in self.taxi_legs:
             if not (length > 0.0 and abs(turn) <= 180.0):
                 raise bad(f"taxi leg ({length}, {turn}) needs length > 0 and |turn| <= 180")

@@ -8,13 +8,15 @@ Every random draw comes from a ``numpy.random.Generator`` the caller seeds.
   Gauss-Markov process whose correlation time follows the mode; velocity noise
   white. Per-axis 1-sigma figures are what the receiver reports as h_acc/v_acc.
 * Attitude: the autopilot's estimate = truth + small Gauss-Markov error + an
-  optional constant heading error (S4's fast-alignment error).
+  optional constant heading error (the fast-alignment error of Markelov et al.).
 
 References
 ----------
-SEEDS.md S1 (tactical gyro drift 1-10 deg/h; RTK fixed 1.6-2.2 cm 2-D /
-2.8-3.4 cm height, float 26-32 / 53-54 cm, > 3.5-4 m without corrections);
-S4 (heading error ~1 deg). Groves, Principles of GNSS, inertial and multisensor
+El-Mowafy (2005), RTK networks for precision approach with an adaptive GPS/INS
+blend (tactical gyro drift 1-10 deg/h; RTK fixed 1.6-2.2 cm 2-D / 2.8-3.4 cm
+height, float 26-32 / 53-54 cm, > 3.5-4 m without corrections). Markelov et al.,
+"INS course correction from satellite navigation before take-off" (heading error
+~1 deg). Groves, Principles of GNSS, inertial and multisensor
 navigation, sec. 4.4 (IMU error model), eq. 3.65 (Gauss-Markov discretisation).
 """
 
@@ -53,7 +55,8 @@ GNSS_MODE_SPECS: dict[str, GnssModeSpec] = {
     "3d": GnssModeSpec(FixType.FIX_3D, 2.5, 4.0, 300.0, 10, 1.2, 1.9, 2.0),
     "none": GnssModeSpec(FixType.NO_FIX, 0.0, 0.0, 300.0, 3, 99.99, 99.99, 0.0),
 }
-"""Per-axis sigmas: RTK fixed 2.1 cm 2-D RMS / 3 cm V, float 0.28 / 0.5 m, 3D 3.5 / 4 m (S1)."""
+"""Per-axis sigmas: RTK fixed 2.1 cm 2-D RMS / 3 cm V, float 0.28 / 0.5 m, 3D 3.5 / 4 m
+(El-Mowafy (2005))."""
 
 ATTITUDE_RATE_NOISE_RADPS = 0.001
 AUTOPILOT_POS_SIGMA_M = (0.3, 0.3, 0.5)
@@ -139,7 +142,8 @@ def imu_errors(
 
     References
     ----------
-    Groves, sec. 4.4.1-4.4.3 (biases, random walk); SEEDS.md S1 (grades).
+    Groves, sec. 4.4.1-4.4.3 (biases, random walk); El-Mowafy (2005) (grades);
+    :mod:`companion.nav.grades` (the grade table).
     """
     if not enabled:
         z = np.zeros((n, 3))
@@ -216,7 +220,8 @@ def fault_offset_ned_m(sc: Scenario, receiver_id: int, t_s: float) -> FloatArray
 
     References
     ----------
-    SEEDS.md S3 (slow ramps, e.g. 4 cm/s; dithering, e.g. a 1 m sinusoid).
+    Kim, Walter and Powell, "Standalone GPS-based flight inspection system" (slow
+    ramps, e.g. 4 cm/s; dithering, e.g. a 1 m sinusoid).
     """
     off = np.zeros(3)
     for ev in sc.events:

@@ -4,7 +4,7 @@
   microseconds (the receive time), then the packed MAVLink 2 frame (system 1,
   component 1, sequence numbers counting from 0). Readable with
   ``pymavlink.mavutil.mavlink_connection``.
-* truth CSV (DESIGN.md): ``t_s, lat_deg, lon_deg, alt_m, vn_mps, ve_mps, vd_mps,
+* truth CSV (``docs/replay.md``): ``t_s, lat_deg, lon_deg, alt_m, vn_mps, ve_mps, vd_mps,
   roll_deg, pitch_deg, yaw_deg, phase, gnss_mode`` at ``truth_rate_hz`` on the
   autopilot clock, ``alt_m`` MSL, evaluated exactly on the path.
 * JSON: scenario (every field), seed, sensor grades, message rates, phases and

@@ -48,11 +48,11 @@ def fly_constant(
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"slots": 0}, {"life_s": 0.0}, {"history_s": math.nan}, {"acc_vrw_mps_rts": -1.0},
-     {"att_err_sigma_rad": (0.1, 0.1)}],
+    [{"slots": 0}, {"slots": 2.5}, {"life_s": 0.0}, {"history_s": math.nan},
+     {"acc_vrw_mps_rts": -1.0}, {"att_err_sigma_rad": (0.1, 0.1)}],
 )  # fmt: skip
 def test_config_validation(kwargs: dict[str, object]) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
         CoastConfig(**kwargs)  # type: ignore[arg-type]
 
 

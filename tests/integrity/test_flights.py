@@ -1,7 +1,8 @@
-"""The simulator's fault flights (S3's 4 cm/s ramp and 1 m dither) and the nominal flight.
+"""The simulator's fault flights (a 4 cm/s ramp and a 1 m dither, after Kim, Walter and
+Powell) and the nominal flight.
 
 The monitor is driven with the flights' typed samples by
-:func:`companion.integrity.synthetic.run_samples` (pass-through navigator on the
+:func:`companion.sim.integrity_runs.run_samples` (pass-through navigator on the
 primary receiver, every fix to the monitor), independently of the engine.
 """
 
@@ -12,7 +13,7 @@ import pytest
 sim = pytest.importorskip("companion.sim")
 
 from companion.integrity.monitor import IntegrityMonitor  # noqa: E402
-from companion.integrity.synthetic import run_samples  # noqa: E402
+from companion.sim.integrity_runs import run_samples  # noqa: E402
 
 
 @pytest.mark.parametrize("name", ["ramp_fault", "dither_fault"])
@@ -30,7 +31,7 @@ def test_fault_flight_is_detected_and_alerted_before_1m(name: str) -> None:
     dt = t_alert - event.t_start_s
     if name == "ramp_fault":
         rate = abs(event.params["rate_ned_mps"][2])
-        assert rate * dt < 1.0  # S3: caught before it reaches 1 m
+        assert rate * dt < 1.0  # caught before it reaches 1 m
     else:
         assert dt < 5.0
 
@@ -43,11 +44,11 @@ def test_nominal_flight_raises_no_fault_or_integrity_alert() -> None:
 
 
 def test_one_receiver_with_the_inertial_coast_catches_the_ramp_flight_before_1m() -> None:
-    """S3's 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
+    """A 4 cm/s ramp with one receiver (tactical IMU): the blend follows it, the
     inertial coast's references catch it before it reaches 1 m; nothing before."""
     from companion.integrity.coast import CoastConfig
-    from companion.integrity.synthetic import run_samples_ins
     from companion.nav.blend import BlendConfig
+    from companion.sim.integrity_runs import run_samples_ins
 
     flight = sim.simulate(sim.make_scenario("ramp_fault", second_receiver=False), seed=1)
     (event,) = [e for e in flight.events if e.kind == "ramp"]

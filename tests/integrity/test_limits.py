@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from companion.integrity.limits import (
+from companion.integrity.protection.levels import k_horizontal, k_vertical, protection_levels
+from companion.integrity.protection.limits import (
     CATEGORY_ACCURACY,
     CATEGORY_LIMITS,
     PHASE_LIMITS,
@@ -16,7 +17,6 @@ from companion.integrity.limits import (
     alert_limit,
     available_category,
 )
-from companion.integrity.protection import k_horizontal, k_vertical, protection_levels
 
 
 def test_every_row_cites_a_source_and_is_positive() -> None:

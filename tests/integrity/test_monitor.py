@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 
 from companion.integrity.coast import CoastState
-from companion.integrity.limits import ApproachCategory, FlightPhase
+from companion.integrity.fde.separation import SeparationResult
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
-from companion.integrity.phase import PhaseConfig
-from companion.integrity.separation import SeparationResult
-from companion.integrity.synthetic import ApproachSpec, Fault, SyntheticReference, run_approach
+from companion.integrity.protection.limits import ApproachCategory, FlightPhase
+from companion.integrity.protection.phase import PhaseConfig
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.sim.integrity_approaches import ApproachSpec, Fault, SyntheticReference, run_approach
 from companion.types import (
     Alert,
     AlertCode,
@@ -90,7 +90,7 @@ def alerts(outs: list[object], code: AlertCode) -> list[Alert]:
     ],
 )
 def test_config_validation(kwargs: dict[str, object]) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
         IntegrityConfig(**kwargs)  # type: ignore[arg-type]
 
 
@@ -284,6 +284,25 @@ def test_1m_dither_caught_where_the_plain_test_is_blind() -> None:
     assert res.baseline_first_s is None
 
 
+@pytest.mark.parametrize(
+    "fault",
+    [
+        Fault("step", 40.0, (1.0, 0.0, -2.0)),
+        Fault("ramp", 40.0, (0.0, 0.03, 0.04)),
+        Fault("dither", 40.0, (0.0, 0.0, 2.0), amplitude_m=1.0, period_s=20.0),
+    ],
+    ids=["step", "ramp", "dither"],
+)
+def test_a_fault_as_a_simulator_event_offsets_the_fixes_the_same(fault: Fault) -> None:
+    from companion.sim import make_scenario
+    from companion.sim.sensors import fault_offset_ned_m
+
+    sc = make_scenario("approach", events=(fault.as_event(1000.0),))
+    times = np.array([39.9, 40.0, 45.3, 61.0])
+    got = np.array([fault_offset_ned_m(sc, 0, float(t)) for t in times])
+    np.testing.assert_allclose(got, fault.offset_ned_m(times), rtol=0.0, atol=1e-12)
+
+
 def test_ramp_on_a_navigator_fusing_both_receivers_is_not_pinned_on_the_good_one() -> None:
     res = run((Fault("ramp", 40.0, (0.0, 0.0, 0.04)),), fuse_all=True)
     assert res.first_alert_s is not None and 0.04 * (res.first_alert_s - 40.0) < 1.0
@@ -378,20 +397,21 @@ def test_two_receivers_and_a_reference_exclude_the_ramping_receiver() -> None:
 
 
 def test_arbitration_needs_a_failed_test_against_a_third_solution() -> None:
-    mon = IntegrityMonitor(cat2_config())
+    attribution = IntegrityMonitor(cat2_config()).fde.attribution
+    pairs = attribution.pairs
     mk = lambda t, fail: SeparationResult(  # noqa: E731
         t, np.zeros(3), 40.0 if fail else 1.0, 35.4, np.zeros(3), math.nan, math.nan, 1, ()
     )
-    mon._now_s = 10.0
+    now = 10.0
     key = ("rx0", "rx1")
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) == 0
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, False), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # both consistent: nothing tells
-    mon._pair_last = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, True)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # both fail: the reference may be off
-    mon._pair_last = {("rx0", "ref:ins0"): mk(-5.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
-    assert mon._arbitrate(0, 1, key, set()) is None  # stale evidence does not count
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) == 0
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, False), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # both consistent: nothing tells
+    pairs.latest = {("rx0", "ref:ins0"): mk(10.0, True), ("rx1", "ref:ins0"): mk(10.0, True)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # both fail: the ref may be off
+    pairs.latest = {("rx0", "ref:ins0"): mk(-5.0, True), ("rx1", "ref:ins0"): mk(10.0, False)}
+    assert attribution.arbitrate(0, 1, key, set(), now) is None  # stale evidence does not count
 
 
 def test_a_reference_anchored_on_the_faulty_receiver_does_not_blame_the_good_one() -> None:
@@ -427,6 +447,6 @@ def test_a_fix_type_change_restarts_the_receivers_series() -> None:
                                 m.vel_var_ned_m2ps2, FixType.RTK_FLOAT, 0)  # fmt: skip
         mon.on_fix(fix(t), m, None, references={"ins0": coast_ref(t, np.zeros(3), 0.0)})
         if k == 49:
-            assert mon._pair_last[key].window_points == 50
+            assert mon.fde.pairs.latest[key].window_points == 50
     assert mon.stats["series_restarted_fix_type"] == 1
-    assert mon._pair_last[key].window_points == 10
+    assert mon.fde.pairs.latest[key].window_points == 10

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from companion.integrity.limits import FlightPhase
-from companion.integrity.phase import PhaseClassifier, PhaseConfig
+from companion.integrity.protection.limits import FlightPhase
+from companion.integrity.protection.phase import PhaseClassifier, PhaseConfig
 from companion.types import LandedState
 
 FIELD = 110.0
@@ -68,5 +68,5 @@ def test_non_finite_state_keeps_the_phase() -> None:
     ],
 )
 def test_config_validation(kwargs: dict[str, float]) -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
         PhaseConfig(**kwargs)

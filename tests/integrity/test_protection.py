@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from companion.integrity.protection import (
+from companion.integrity.protection.levels import (
     d_major_m,
     k_horizontal,
     k_vertical,

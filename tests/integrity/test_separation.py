@@ -8,10 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-from companion.integrity.separation import (
-    ReferenceDrift,
-    SeparationTracker,
-    _mahalanobis3,
+from companion.integrity.fde.separation import ReferenceDrift, SeparationTracker, _mahalanobis3
+from companion.integrity.fde.thresholds import (
     _tau_grid,
     curvature_residual_norm_s2,
     thresholds_for_times,
@@ -42,7 +40,7 @@ def test_white_noise_thresholds_contain_s3_formulas() -> None:
     tc = t - t.mean()
     white_sb = 1.0 / math.sqrt(tc @ tc)
     assert th.slope_sigma_per_s >= white_sb
-    assert th.rss_threshold >= chi2.isf(P_TEST, t.size - 2) - 1e-9  # S3's sigma^2 chi2(n-2)
+    assert th.rss_threshold >= chi2.isf(P_TEST, t.size - 2) - 1e-9  # the paper's sigma^2 chi2(n-2)
     assert th.slope_threshold_per_s == pytest.approx(norm.isf(P_TEST / 2) * th.slope_sigma_per_s)
 
 

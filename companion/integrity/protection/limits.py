@@ -1,7 +1,7 @@
 """Requirement tables: alert limits per flight phase and approach category.
 
 Every row cites where its numbers come from. The monitor compares the
-protection levels (:mod:`companion.integrity.protection`) with the alert limit
+protection levels (:mod:`companion.integrity.protection.levels`) with the alert limit
 of the current flight phase; in the approach and landing phases the limit is
 the one of the approach category the operator requires (configuration), and
 the *available* category (published as ``CMP_CAT``) is the best one whose
@@ -14,11 +14,13 @@ to be called available.
 
 References
 ----------
-SEEDS.md S0 (RAIM horizontal alert limits 555 m departure / 1850 m en-route
-and TMA / 550 m approach and NPA; NATO MASPS for GPS: vertical alarm limit
-5.4 m, time to alarm 2 s threshold / 1 s objective; ICAO: precision approach
-time-to-alarm 6 s, CAT II/III 2 s). SEEDS.md S1 (95 % accuracy CAT I 17.1 m H
-/ 4.1 m V, CAT II 5.2 / 1.7, CAT III 4.1 / 0.6). ICAO Annex 10 Vol. I,
+Grzegorzewski (2005), "Navigating by a position potential in 3-D" (RAIM
+horizontal alert limits 555 m departure / 1850 m en-route and TMA / 550 m
+approach and NPA; NATO MASPS for GPS: vertical alarm limit 5.4 m, time to alarm
+2 s threshold / 1 s objective; ICAO: precision approach time-to-alarm 6 s, CAT
+II/III 2 s). El-Mowafy (2005), RTK networks for precision approach with an
+adaptive GPS/INS blend (95 % accuracy CAT I 17.1 m H / 4.1 m V, CAT II 5.2 /
+1.7, CAT III 4.1 / 0.6). ICAO Annex 10 Vol. I,
 Table 3.7.2.4-1 (APV / LPV-200: HAL 40 m, VAL 35 m; terminal TTA 15 s, NPA
 TTA 10 s). ICAO Annex 10 Vol. I, Attachment D, GBAS approach service type D
 (lateral alert limit 17 m at 200 ft) for the CAT II/III horizontal limit.
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 
 
 class FlightPhase(enum.Enum):
-    """Flight phase, determined from the state (:mod:`companion.integrity.phase`)."""
+    """Flight phase, determined from the state (:mod:`companion.integrity.protection.phase`)."""
 
     TAXI = "taxi"
     TAKEOFF = "takeoff"
@@ -84,7 +86,7 @@ PHASE_LIMITS: dict[FlightPhase, AlertLimit] = {
         math.inf,
         math.inf,
         math.inf,
-        "S0 tables set no integrity requirement for surface movement",
+        "Grzegorzewski (2005): no integrity requirement for surface movement",
     ),
     FlightPhase.TAKEOFF: AlertLimit(
         "departure",
@@ -92,7 +94,8 @@ PHASE_LIMITS: dict[FlightPhase, AlertLimit] = {
         math.inf,
         15.0,
         15.0,
-        "S0: RAIM HAL 555 m departure; ICAO Annex 10 Table 3.7.2.4-1 terminal TTA 15 s",
+        "Grzegorzewski (2005): RAIM HAL 555 m departure; "
+        "ICAO Annex 10 Table 3.7.2.4-1 terminal TTA 15 s",
     ),
     FlightPhase.ENROUTE: AlertLimit(
         "en-route/TMA",
@@ -100,7 +103,8 @@ PHASE_LIMITS: dict[FlightPhase, AlertLimit] = {
         math.inf,
         15.0,
         15.0,
-        "S0: RAIM HAL 1850 m en-route and TMA; ICAO Annex 10 Table 3.7.2.4-1 terminal TTA 15 s",
+        "Grzegorzewski (2005): RAIM HAL 1850 m en-route and TMA; "
+        "ICAO Annex 10 Table 3.7.2.4-1 terminal TTA 15 s",
     ),
     FlightPhase.APPROACH: AlertLimit(
         "NPA",
@@ -108,7 +112,8 @@ PHASE_LIMITS: dict[FlightPhase, AlertLimit] = {
         math.inf,
         10.0,
         10.0,
-        "S0: RAIM HAL 550 m approach and NPA; ICAO Annex 10 Table 3.7.2.4-1 NPA TTA 10 s",
+        "Grzegorzewski (2005): RAIM HAL 550 m approach and NPA; "
+        "ICAO Annex 10 Table 3.7.2.4-1 NPA TTA 10 s",
     ),
     FlightPhase.LANDING: AlertLimit(
         "NPA",
@@ -116,7 +121,8 @@ PHASE_LIMITS: dict[FlightPhase, AlertLimit] = {
         math.inf,
         10.0,
         10.0,
-        "S0: RAIM HAL 550 m approach and NPA; ICAO Annex 10 Table 3.7.2.4-1 NPA TTA 10 s",
+        "Grzegorzewski (2005): RAIM HAL 550 m approach and NPA; "
+        "ICAO Annex 10 Table 3.7.2.4-1 NPA TTA 10 s",
     ),
 }
 """Alert limits per phase when no approach category is required (or outside approach)."""
@@ -128,8 +134,8 @@ CATEGORY_LIMITS: dict[ApproachCategory, AlertLimit] = {
         35.0,
         6.0,
         6.0,
-        "ICAO Annex 10 Table 3.7.2.4-1 LPV-200 HAL 40 m / VAL 35 m; S0 ICAO precision "
-        "approach TTA 6 s",
+        "ICAO Annex 10 Table 3.7.2.4-1 LPV-200 HAL 40 m / VAL 35 m; Grzegorzewski (2005): "
+        "ICAO precision approach TTA 6 s",
     ),
     ApproachCategory.CAT_II: AlertLimit(
         "CAT II",
@@ -137,7 +143,8 @@ CATEGORY_LIMITS: dict[ApproachCategory, AlertLimit] = {
         5.4,
         2.0,
         1.0,
-        "S0 NATO MASPS VAL 5.4 m, TTA 2 s (1 s objective); S0 ICAO CAT II/III TTA 2 s; "
+        "Grzegorzewski (2005): NATO MASPS VAL 5.4 m, TTA 2 s (1 s objective), ICAO CAT "
+        "II/III TTA 2 s; "
         "HAL 17 m: ICAO Annex 10 Att. D GBAS GAST D lateral alert limit",
     ),
     ApproachCategory.CAT_III: AlertLimit(
@@ -146,16 +153,23 @@ CATEGORY_LIMITS: dict[ApproachCategory, AlertLimit] = {
         5.4,
         2.0,
         1.0,
-        "S0 NATO MASPS VAL 5.4 m, TTA 2 s (1 s objective); S0 ICAO CAT II/III TTA 2 s; "
+        "Grzegorzewski (2005): NATO MASPS VAL 5.4 m, TTA 2 s (1 s objective), ICAO CAT "
+        "II/III TTA 2 s; "
         "HAL 17 m: ICAO Annex 10 Att. D GBAS GAST D lateral alert limit",
     ),
 }
 """Alert limits of the precision-approach categories (approach and landing phases)."""
 
 CATEGORY_ACCURACY: dict[ApproachCategory, AccuracyRequirement] = {
-    ApproachCategory.CAT_I: AccuracyRequirement(17.1, 4.1, "S1: CAT I 17.1 m H / 4.1 m V (95 %)"),
-    ApproachCategory.CAT_II: AccuracyRequirement(5.2, 1.7, "S1: CAT II 5.2 m H / 1.7 m V (95 %)"),
-    ApproachCategory.CAT_III: AccuracyRequirement(4.1, 0.6, "S1: CAT III 4.1 m H / 0.6 m V (95 %)"),
+    ApproachCategory.CAT_I: AccuracyRequirement(
+        17.1, 4.1, "El-Mowafy (2005): CAT I 17.1 m H / 4.1 m V (95 %)"
+    ),
+    ApproachCategory.CAT_II: AccuracyRequirement(
+        5.2, 1.7, "El-Mowafy (2005): CAT II 5.2 m H / 1.7 m V (95 %)"
+    ),
+    ApproachCategory.CAT_III: AccuracyRequirement(
+        4.1, 0.6, "El-Mowafy (2005): CAT III 4.1 m H / 0.6 m V (95 %)"
+    ),
 }
 """95 % accuracy each category requires (what tells CAT III from CAT II)."""
 
@@ -192,7 +206,8 @@ def available_category(hpl_m: float, vpl_m: float, h95_m: float, v95_m: float) -
 
     References
     ----------
-    S1 accuracy table; S0 / ICAO alert limits (module docstring).
+    El-Mowafy (2005) accuracy table; Grzegorzewski (2005) and ICAO alert limits (module
+    docstring).
     """
     best = ApproachCategory.NONE
     isfinite = math.isfinite

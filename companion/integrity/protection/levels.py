@@ -19,7 +19,9 @@ References
 ----------
 RTCA DO-229 (WAAS MOPS), appendix J: d_major, HPL = K_H d_major,
 VPL = K_V d_V with K_H 6.18 (the non-precision value; 6.0 for precision approach)
-and K_V 5.33. SEEDS.md S3 (protection against the alert limits of S0/S1).
+and K_V 5.33. Kim, Walter and Powell, "Standalone GPS-based flight inspection
+system" (protection levels against the alert limits of
+:mod:`companion.integrity.protection.limits`). ``docs/methods.md``.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from scipy.stats import chi2, norm
 from companion.types import FloatArray
 
 ACCURACY_PROB = 0.95
-"""Probability of the '95 %' accuracy figures (S1's requirement tables)."""
+"""Probability of the '95 %' accuracy figures (El-Mowafy (2005), requirement tables)."""
 
 
 def k_vertical(integrity_risk: float) -> float:

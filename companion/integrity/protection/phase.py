@@ -1,6 +1,6 @@
 """Flight phase from the navigation state: taxi, take-off, en-route, approach, landing.
 
-The phase decides which alert limit applies (:mod:`companion.integrity.limits`).
+The phase decides which alert limit applies (:mod:`companion.integrity.protection.limits`).
 Inputs are the published solution (height, ground speed, vertical speed) and,
 when the autopilot sends EXTENDED_SYS_STATE, its landed state. Height above the
 field is the altitude less the field elevation, which is configured or learned
@@ -24,8 +24,9 @@ References
 ----------
 ICAO Doc 8168 (PANS-OPS): decision heights 200 ft CAT I, 100 ft CAT II;
 the terminal area below 1500 ft above the aerodrome for approach/departure.
-SEEDS.md S0 (requirements per flight phase), S1 (take-off and landing as the
-hardest phases).
+Grzegorzewski (2005), "Navigating by a position potential in 3-D" (requirements
+per flight phase); El-Mowafy (2005), RTK networks for precision approach with an
+adaptive GPS/INS blend (take-off and landing as the hardest phases).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.integrity.limits import FlightPhase
+from companion.integrity.protection.limits import FlightPhase
+from companion.ranges import check_ranges, ranged
 from companion.types import FloatArray, LandedState
 
 FT_M = 0.3048
@@ -46,37 +48,25 @@ FT_M = 0.3048
 class PhaseConfig:
     """Thresholds of the phase rules (see the module docstring)."""
 
-    field_elevation_msl_m: float | None = None
+    field_elevation_msl_m: float | None = ranged(None, optional=True)
     """Aerodrome elevation; None: learned on the ground."""
-    ground_height_m: float = 5.0
+    ground_height_m: float = ranged(5.0, gt=0.0)
     """Below this height above the field with a small vertical speed: on the ground."""
-    landing_height_m: float = 100.0 * FT_M
+    landing_height_m: float = ranged(100.0 * FT_M, gt=0.0)
     """CAT II decision height (100 ft): below it, descending, the phase is LANDING."""
-    terminal_height_m: float = 1500.0 * FT_M
+    terminal_height_m: float = ranged(1500.0 * FT_M, gt=0.0)
     """Below 1500 ft above the field a descent is an APPROACH, a climb a departure."""
-    vertical_speed_mps: float = 1.0
+    vertical_speed_mps: float = ranged(1.0, gt=0.0)
     """Vertical speed that counts as climbing / descending (a 3 deg glide at 20 m/s is 1 m/s)."""
-    taxi_max_speed_mps: float = 15.0
+    taxi_max_speed_mps: float = ranged(15.0, gt=0.0)
     """Ground speed above which a ground run is a take-off roll or landing roll-out."""
-    stationary_speed_mps: float = 0.5
+    stationary_speed_mps: float = ranged(0.5, gt=0.0)
     """Below this ground speed a first solution with no landed state is taken as on ground."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "ground_height_m",
-            "landing_height_m",
-            "terminal_height_m",
-            "vertical_speed_mps",
-            "taxi_max_speed_mps",
-            "stationary_speed_mps",
-        ):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"{name} must be finite and > 0")
+        check_ranges(self)
         if not self.ground_height_m < self.landing_height_m < self.terminal_height_m:
             raise ValueError("need ground_height_m < landing_height_m < terminal_height_m")
-        if self.field_elevation_msl_m is not None and not math.isfinite(self.field_elevation_msl_m):
-            raise ValueError("field_elevation_msl_m must be finite")
 
 
 class PhaseClassifier:

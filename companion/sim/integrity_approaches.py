@@ -10,53 +10,50 @@ receiver 0 (step, ramp or dither, as the simulator's events).
 
 The navigator is :class:`CvKalman`, a constant-velocity Kalman filter that
 fuses every fix of every receiver (as the GNSS/INS blend does): it follows a
-slow ramp, which is the point of S3. Its process noise is derived from the
-truth's velocity wander (``q = 2 sigma_v^2 / tau_v``), so its innovation
-statistics are honest. No IMU, no 400 Hz loop: ten hours of approaches run in
-minutes, which is what the Monte Carlo bench needs.
+slow ramp, which is what solution separation is for (Kim, Walter and Powell).
+Its process noise is derived from the truth's velocity wander
+(``q = 2 sigma_v^2 / tau_v``), so its innovation statistics are honest. No IMU,
+no 400 Hz loop: hours of approaches run in minutes, which is what the Monte
+Carlo bench (``bench/integrity.py``) needs.
+
+:mod:`companion.sim.integrity_runs` drives the monitor with a simulated flight's
+samples instead.
 
 References
 ----------
-SEEDS.md S3 (4 cm/s ramp, 1 m dither); S1 (GNSS mode accuracies, via the
-simulator's table); Bar-Shalom, Li, Kirubarajan (2001) sec. 6.2 (the
-constant-velocity model).
+Kim, Walter and Powell, "Standalone GPS-based flight inspection system" (4 cm/s
+ramp, 1 m dither); El-Mowafy (2005) (GNSS mode accuracies, via the simulator's
+table); Bar-Shalom, Li, Kirubarajan (2001) sec. 6.2 (the constant-velocity
+model). ``docs/methods.md`` (the integrity monitor).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2
 
-from companion.integrity.coast import CoastConfig, CoastState, InertialCoast
+from companion.integrity.coast import CoastState
 from companion.integrity.monitor import IntegrityMonitor
-from companion.nav import earth
-from companion.nav.blend import BlendConfig, BlendNavigator
-from companion.nav.frames import LocalFrame
-from companion.nav.gnss import gnss_measurement
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator, NavState
-from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.ranges import check_ranges, ranged
+from companion.sim.integrity_runs import is_alarm
+from companion.sim.scenarios import Event
 from companion.sim.sensors import GNSS_MODE_SPECS, gauss_markov_fast
 from companion.types import (
     Alert,
-    AlertCode,
-    AttitudeSample,
     FixType,
     FloatArray,
     GnssFix,
-    ImuSample,
-    LandedState,
-    LandedStateSample,
     NavMode,
     NavSolution,
     Output,
-    Sample,
 )
 
 FAULT_KINDS = ("step", "ramp", "dither")
+USABLE_GNSS_MODES = tuple(mode for mode in GNSS_MODE_SPECS if mode != "none")
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,6 +93,22 @@ class Fault:
         axis = vec / np.linalg.norm(vec)
         return on * self.amplitude_m * np.sin(2.0 * math.pi * tau / self.period_s)[:, None] * axis
 
+    def as_event(self, t_end_s: float) -> Event:
+        """The same fault as the simulator's event on ``[t_start_s, t_end_s)``
+        (:mod:`companion.sim.scenarios`: step ``offset_ned_m``, ramp ``rate_ned_mps``,
+        dither ``amplitude_m``, ``period_s``, ``axis_ned``)."""
+        params: dict[str, object]
+        if self.kind == "dither":
+            params = {
+                "amplitude_m": self.amplitude_m,
+                "period_s": self.period_s,
+                "axis_ned": self.vector_ned,
+            }
+        else:
+            key = "offset_ned_m" if self.kind == "step" else "rate_ned_mps"
+            params = {key: self.vector_ned}
+        return Event(self.kind, self.t_start_s, t_end_s, self.receiver_id, params)
+
     def size_m(self, t_s: float) -> float:
         """Magnitude of the offset at ``t_s``, m (for a dither: its amplitude once started)."""
         if t_s < self.t_start_s:
@@ -109,30 +122,24 @@ class Fault:
 class ApproachSpec:
     """One synthetic approach."""
 
-    duration_s: float = 115.0
-    speed_mps: float = 70.0
+    duration_s: float = ranged(115.0, gt=0.0)
+    speed_mps: float = ranged(70.0, gt=0.0)
     glide_deg: float = 3.0
     start_height_m: float = 440.0
     field_elevation_msl_m: float = 110.0
-    gnss_mode: str = "rtk_fixed"
-    rate_hz: float = 10.0
-    receivers: int = 2
+    gnss_mode: str = ranged("rtk_fixed", choices=USABLE_GNSS_MODES)
+    rate_hz: float = ranged(10.0, gt=0.0)
+    receivers: int = ranged(2, choices=(1, 2))
     vel_wander_h_mps: float = 1.0
     vel_wander_v_mps: float = 0.3
-    vel_wander_tau_s: float = 10.0
+    vel_wander_tau_s: float = ranged(10.0, gt=0.0)
     fuse_all: bool = False
     """False: the navigator fuses the first receiver not excluded (the primary; the other is
     the independent solution); True: it fuses every receiver not excluded."""
     faults: tuple[Fault, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
-        if self.gnss_mode not in GNSS_MODE_SPECS or self.gnss_mode == "none":
-            raise ValueError("gnss_mode must be a usable GNSS mode")
-        if self.receivers not in (1, 2):
-            raise ValueError("receivers must be 1 or 2")
-        for name in ("duration_s", "speed_mps", "rate_hz", "vel_wander_tau_s"):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0")
+        check_ranges(self)
 
 
 class CvKalman:
@@ -415,7 +422,7 @@ def run_approach(
         )
         outputs += monitor.on_solution(sol)
         for out in outputs:
-            if isinstance(out, Alert) and _is_alarm(out):
+            if isinstance(out, Alert) and is_alarm(out):
                 alerts.append(out.t_s)
                 texts.append(out.text)
     t_from = t_from_s + t_offset_s
@@ -427,45 +434,6 @@ def run_approach(
     return RunResult(
         first, tuple(alerts), base_first, tuple(base_alerts), hours, monitor, first_text
     )
-
-
-def _offer(
-    nav: Navigator, monitor: IntegrityMonitor, meas: GnssMeasurement, last_t: dict[int, float]
-) -> GnssUpdate | None:
-    """The engine's receiver policy: the fix goes to the navigator only from the primary,
-    the lowest-numbered receiver not excluded and heard within the last second."""
-    rid = meas.receiver_id
-    last_t[rid] = meas.t_s
-    primary = min(
-        (r for r in last_t if not monitor.exclude(r) and meas.t_s - last_t[r] < 1.0),
-        default=None,
-    )
-    return nav.on_gnss(meas, gate=nav.initialised) if rid == primary else None
-
-
-def _solution(state: NavState, frame: LocalFrame, fix: GnssFix) -> NavSolution:
-    """The navigator's state published as the engine would in normal mode."""
-    lat, lon, alt = frame.ned_to_lla(state.pos_ned_m)
-    return NavSolution(
-        t_s=state.t_s,
-        lat_rad=lat,
-        lon_rad=lon,
-        alt_msl_m=alt,
-        vel_ned_mps=state.vel_ned_mps,
-        pos_cov_ned_m2=state.pos_cov_ned_m2,
-        vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
-        yaw_rad=None,
-        mode=NavMode.NORMAL,
-        fix_type=fix.fix_type,
-        satellites=fix.satellites or 0,
-    )
-
-
-def _is_alarm(alert: Alert) -> bool:
-    """A FAULT alert, or an INTEGRITY alert that announces a loss (not a restoration)."""
-    if alert.code is AlertCode.FAULT:
-        return True
-    return alert.code is AlertCode.INTEGRITY and alert.text.startswith("lost")
 
 
 def _fix(t_s: float, rid: int, fix_type: FixType) -> GnssFix:
@@ -488,163 +456,3 @@ def _fix(t_s: float, rid: int, fix_type: FixType) -> GnssFix:
         vdop=None,
         satellites=None,
     )
-
-
-@dataclass(frozen=True, slots=True)
-class SampleRunResult:
-    """Alarms of :func:`run_samples`: (t_s, code, text) of every FAULT / INTEGRITY-lost alert,
-    every alert, and the monitor after the run."""
-
-    alarms: tuple[tuple[float, str, str], ...]
-    alerts: tuple[Alert, ...]
-    monitor: IntegrityMonitor
-
-
-def run_samples(
-    samples: Sequence[Sample], monitor: IntegrityMonitor, publish_rate_hz: float = 10.0
-) -> SampleRunResult:
-    """Drive the monitor with a simulated flight's typed samples, without the engine.
-
-    The navigator is the GNSS pass-through (:class:`PassthroughNavigator`) fed with the
-    first receiver not excluded (the primary); every fix goes to the monitor; a
-    solution is published at ``publish_rate_hz`` on the fix clock with the autopilot's
-    landed state as the phase hint. This is the monitor's own path through a flight,
-    for tests and the bench; the engine wires the same calls.
-    """
-    nav = PassthroughNavigator(PassthroughConfig())
-    frame: LocalFrame | None = None
-    landed: LandedState | None = None
-    alerts: list[Alert] = []
-    tick = -1
-    last_t: dict[int, float] = {}
-    monitor.reset()
-    for sample in samples:
-        if isinstance(sample, LandedStateSample):
-            landed = sample.landed_state
-            continue
-        if not isinstance(sample, GnssFix) or int(sample.fix_type) < int(FixType.FIX_3D):
-            continue
-        if frame is None:
-            frame = LocalFrame(sample.lat_rad, sample.lon_rad, sample.alt_msl_m)
-        meas = gnss_measurement(sample, frame)
-        update = _offer(nav, monitor, meas, last_t)
-        outs = monitor.on_fix(sample, meas, update)
-        k = math.floor(sample.t_s * publish_rate_hz + 1e-6)
-        if k > tick and nav.initialised:
-            tick = k
-            state = nav.predict(sample.t_s)
-            if state is not None:
-                outs += monitor.on_solution(_solution(state, frame, sample), landed)
-        alerts += [o for o in outs if isinstance(o, Alert)]
-    alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
-    return SampleRunResult(alarms, tuple(alerts), monitor)
-
-
-@dataclass(frozen=True, slots=True)
-class InsRunResult:
-    """Alarms of :func:`run_samples_ins` (as :class:`SampleRunResult`), the exclusions seen
-    (receiver id -> first time it was excluded), and the monitor and coast after the run."""
-
-    alarms: tuple[tuple[float, str, str], ...]
-    alerts: tuple[Alert, ...]
-    excluded_first_s: dict[int, float]
-    monitor: IntegrityMonitor
-    coast: InertialCoast
-
-
-def run_samples_ins(
-    samples: Sequence[Sample],
-    monitor: IntegrityMonitor,
-    blend_config: BlendConfig,
-    coast_config: CoastConfig,
-    publish_rate_hz: float = 10.0,
-    use_bias_estimate: bool = True,
-    use_coast: bool = True,
-) -> InsRunResult:
-    """Drive the GNSS/INS blend, the inertial coast and the monitor with a flight's samples.
-
-    The engine's rules, without the engine: the blend fuses the first receiver not
-    excluded (the primary); every fix goes to the monitor with the coast's references
-    at the fix time; a slot is re-anchored from the blend's state at its newest IMU
-    time (and its accelerometer-bias estimate and covariance when
-    ``use_bias_estimate``) when due, but not while the monitor reports a fault; a
-    solution is published at ``publish_rate_hz`` on the fix clock. ``use_coast``
-    False gives the same run without references (the baseline).
-    """
-    frame: LocalFrame | None = None
-    nav: BlendNavigator | None = None
-    coast: InertialCoast | None = None
-    pending: list[Sample] = []
-    landed: LandedState | None = None
-    alerts: list[Alert] = []
-    excluded: dict[int, float] = {}
-    tick = -1
-    last_t: dict[int, float] = {}
-    monitor.reset()
-    for sample in samples:
-        if isinstance(sample, LandedStateSample):
-            landed = sample.landed_state
-            continue
-        if frame is None:
-            if isinstance(sample, GnssFix) and int(sample.fix_type) >= int(FixType.FIX_3D):
-                frame = LocalFrame(sample.lat_rad, sample.lon_rad, sample.alt_msl_m)
-                nav = BlendNavigator(blend_config, frame)
-                coast = InertialCoast(
-                    coast_config, earth.gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
-                )
-                for old in pending:  # the last history_s of IMU and attitude
-                    _feed_ins(old, nav, coast)
-            elif isinstance(sample, ImuSample | AttitudeSample):
-                pending.append(sample)
-                while pending[0].t_s < sample.t_s - blend_config.history_s:
-                    pending.pop(0)
-                continue
-            else:
-                continue
-        if nav is None or coast is None or frame is None:
-            continue
-        if isinstance(sample, ImuSample | AttitudeSample):
-            _feed_ins(sample, nav, coast)
-            if (
-                isinstance(sample, ImuSample)
-                and nav.initialised
-                and not monitor.fault_detected
-                and coast.anchor_due(nav.imu_t_s)
-            ):
-                state = nav.predict(nav.imu_t_s)
-                if state is not None:
-                    if use_bias_estimate:
-                        cov = nav.covariance
-                        coast.anchor(state, nav.biases[0], cov[9:12, 9:12])
-                    else:
-                        coast.anchor(state)
-            continue
-        if not isinstance(sample, GnssFix) or int(sample.fix_type) < int(FixType.FIX_3D):
-            continue
-        meas = gnss_measurement(sample, frame)
-        update = _offer(nav, monitor, meas, last_t)
-        refs = coast.references(sample.t_s) if use_coast else None
-        outs = monitor.on_fix(sample, meas, update, references=refs)
-        for r in list(last_t):
-            if monitor.exclude(r) and r not in excluded:
-                excluded[r] = sample.t_s
-        k = math.floor(sample.t_s * publish_rate_hz + 1e-6)
-        if k > tick and nav.initialised:
-            tick = k
-            state = nav.predict(max(sample.t_s, nav.imu_t_s))
-            if state is not None:
-                outs += monitor.on_solution(_solution(state, frame, sample), landed)
-        alerts += [o for o in outs if isinstance(o, Alert)]
-    if coast is None:
-        coast = InertialCoast(coast_config, earth.gravity_ned_mps2(0.0, 0.0))
-    alarms = tuple((a.t_s, a.code.value, a.text) for a in alerts if _is_alarm(a))
-    return InsRunResult(alarms, tuple(alerts), excluded, monitor, coast)
-
-
-def _feed_ins(sample: Sample, nav: BlendNavigator, coast: InertialCoast) -> None:
-    if isinstance(sample, ImuSample):
-        nav.on_imu(sample)
-        coast.on_imu(sample)
-    elif isinstance(sample, AttitudeSample):
-        nav.on_attitude(sample, 0.0)
-        coast.on_attitude(sample)
