@@ -80,6 +80,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from scipy import stats
 
 from companion.mavlink import units
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.mavlink.tlog import TlogError, TlogReader
 from companion.types import FloatArray
 
@@ -567,7 +568,7 @@ class _Published:
 
 def _extract(records: Sequence[tuple[float, Any]], path: Path) -> _Published:
     """Pull the service's publications (component 191) out of the tlog records."""
-    own = units.MAV_COMP_ID_ONBOARD_COMPUTER
+    own = MAV_COMP_ID_ONBOARD_COMPUTER
     gpi_rows: list[tuple[float, ...]] = []
     gpi_stream_idx: list[int] = []
     gpi_offsets: list[float] = []

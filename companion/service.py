@@ -30,7 +30,7 @@ from pathlib import Path
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, open_link
 from companion.notify import SystemdNotifier
 from companion.pipeline import Pipeline

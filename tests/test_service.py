@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.mavlink.tlog import TlogReader
-from companion.mavlink.units import MAV_COMP_ID_ONBOARD_COMPUTER
 
 ROOT = Path(__file__).resolve().parent.parent
 FIXTURE = ROOT / "sitl_fixtures" / "approach_rtk20.tlog"

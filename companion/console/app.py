@@ -21,15 +21,10 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.mavlink.link import LinkError, open_link
-from companion.mavlink.units import (
-    CDEG_PER_RAD,
-    DEGE7_PER_RAD,
-    MAV_COMP_ID_ONBOARD_COMPUTER,
-    MM_PER_M,
-    UINT16_UNKNOWN,
-)
+from companion.mavlink.units import CDEG_PER_RAD, DEGE7_PER_RAD, MM_PER_M, UINT16_UNKNOWN
 
 REDRAW_S = 0.5
 SEVERITY_NAMES = ("EMERG", "ALERT", "CRIT", "ERROR", "WARN", "NOTICE", "INFO", "DEBUG")

@@ -37,6 +37,3 @@ UINT8_UNKNOWN = 255
 EPOCH_USEC_THRESHOLD = 1_000_000_000_000_000
 """A time_usec above this (about 31.7 years) is UNIX epoch time, not time since boot
 (MAVLink: 'the receiving end can infer timestamp format by checking the magnitude')."""
-
-MAV_COMP_ID_AUTOPILOT1 = 1
-MAV_COMP_ID_ONBOARD_COMPUTER = 191

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.mavlink import units
-from companion.mavlink.decode import MAV_CMD_USER_1, Decoder, DecoderConfig
+from companion.mavlink.decode import Decoder, DecoderConfig
+from companion.mavlink.ids import MAV_CMD_USER_1
 from companion.nav.frames import euler_to_quat
 from companion.types import (
     AttitudeSample,

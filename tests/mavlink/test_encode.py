@@ -12,7 +12,8 @@ from pymavlink.dialects.v20 import development as dev
 from companion.mavlink import units
 from companion.mavlink.decode import Decoder
 from companion.mavlink.encode import Encoder, EncoderConfig
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.types import (
     Alert,
     AlertCode,
@@ -59,7 +60,7 @@ def roundtrip(enc: Encoder, msgs: list, module: object = apm) -> list:
     assert p.bad_frames == 0 and len(out) == len(msgs)
     for m in out:
         assert m.get_srcSystem() == enc.system_id
-        assert m.get_srcComponent() == units.MAV_COMP_ID_ONBOARD_COMPUTER
+        assert m.get_srcComponent() == MAV_COMP_ID_ONBOARD_COMPUTER
     return out
 
 
