@@ -9,7 +9,7 @@ later. The decoding and CRC check of a candidate are pymavlink's
 (``MAVLink.decode``), so what is accepted is exactly what pymavlink accepts;
 the common frames go through :class:`~companion.mavlink.messages.FastDecoder`,
 which builds the same message objects from pymavlink's own message
-definitions at a third of the cost (anything it does not handle still goes to
+definitions, more cheaply (anything it does not handle still goes to
 ``MAVLink.decode``).
 
 Counting convention: ``bad_frames`` counts *bad regions*, a maximal run of

@@ -1,7 +1,7 @@
 """MAVLink message objects from frames: a fast path of pymavlink's ``MAVLink.decode``.
 
 :func:`companion.mavlink.framing.try_frame` hands every candidate frame to
-pymavlink's ``MAVLink.decode``, which spends most of its ~10 us per message on
+pymavlink's ``MAVLink.decode``, which spends most of its time per message on
 generic bookkeeping. :class:`FastDecoder` does the same work for an unsigned
 MAVLink 2 frame of a message the dialect knows, with what pymavlink generated
 for that message (its ``unpacker`` struct, ``orders``, ``lengths``,

@@ -73,7 +73,7 @@ class TlogReader:
         accepts that the recording clock stepped.
     light_ids
         Message ids yielded as :class:`~companion.mavlink.messages.LightMessage`
-        (fields, header and pymavlink's few accessors, built at a third of the cost)
+        (fields, header and pymavlink's few accessors, cheaper to build)
         rather than pymavlink objects: for consumers known to read only those, such as
         :class:`companion.mavlink.decode.Decoder` with
         :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`. Default: none.

@@ -2,9 +2,10 @@
 
 Every integer scaling MAVLink uses (1e7 degrees, mm, cm/s, mG, mrad/s,
 centidegrees, "unknown" sentinels) lives here, and is applied only in
-:mod:`companion.mavlink.decode`, :mod:`companion.mavlink.encode` and the
-simulator's autopilot writer (which must speak the autopilot's dialect).
-The core never sees a MAVLink unit.
+:mod:`companion.mavlink` (decode, encode, and readback of what we published)
+and the simulator's autopilot writer (which must speak the autopilot's
+dialect). The core never sees a MAVLink unit. Message ids and enum values are
+in :mod:`companion.mavlink.ids`.
 """
 
 from __future__ import annotations

@@ -104,7 +104,7 @@ class GnssDecoder:
         epv = msg.epv
         sats = msg.satellites_visible
         t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - self._gnss_delay_s
-        # positional, in GnssFix's field order (18 keywords cost a third more)
+        # positional, in GnssFix's field order (18 keywords cost more on this path)
         return GnssFix(
             t_s,
             t_rx_s,

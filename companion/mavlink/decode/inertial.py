@@ -67,7 +67,7 @@ class InertialDecoder:
             raise Rejected("nan_field")
         if a2 > self._max_acc2 or g2 > self._max_gyro2:
             raise Rejected("imu_out_of_range")
-        # positional: a third faster than keywords at 50 Hz (t_s, t_rx_s, acc, gyro, id, source)
+        # positional, cheaper than keywords at 50 Hz (t_s, t_rx_s, acc, gyro, id, source)
         return ImuSample(t_s, t_rx_s, np.array((ax, ay, az)), np.array((gx, gy, gz)), imu_id, src)
 
     def raw_imu(self, msg: Any, t_rx_s: float) -> ImuSample:
