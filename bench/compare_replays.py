@@ -9,7 +9,7 @@ writing ``OUT_DIR/<fixture>.tlog``. Run it once with the reference code and
 once with the changed code (e.g. from two checkouts), then compare.
 
 The comparison, per fixture: byte-identical output files pass at once.
-Otherwise both are decoded with pymavlink and compared message by message
+Otherwise both are read (``companion.mavlink.tlog.TlogReader``) and compared message by message
 (same count, types, order and record times); each field must agree to the
 resolution MAVLink gives it:
 
@@ -70,17 +70,11 @@ def replay_all(out_dir: Path) -> None:
 
 
 def _records(path: Path) -> list[tuple[float, Any]]:
-    from pymavlink import mavutil
+    """``(record time, pymavlink message)`` of every record, with the service's tlog reader."""
+    sys.path.insert(0, str(ROOT))
+    from companion.mavlink.tlog import TlogReader
 
-    conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
-    out = []
-    while True:
-        msg = conn.recv_msg()
-        if msg is None:
-            break
-        out.append((msg._timestamp, msg))
-    conn.close()
-    return out
+    return list(TlogReader(path))
 
 
 def _compare_values(a: Any, b: Any, stats: Counter[str]) -> bool:

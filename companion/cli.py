@@ -72,7 +72,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     else:
         print(evaluation.to_text())
     if args.plot is not None:
-        from companion.report import plot_evaluation
+        from companion.evaluate.plot import plot_evaluation
 
         plot_evaluation(evaluation, args.plot)
         print(f"plot: {args.plot}", file=sys.stderr)

@@ -27,6 +27,14 @@ from companion.config import Config
 from companion.engine import Engine
 from companion.mavlink.decode import Decoder
 from companion.mavlink.encode import Encoder
+from companion.mavlink.ids import (
+    MAV_CMD_USER_1,
+    MAV_RESULT_ACCEPTED,
+    MAV_RESULT_TEMPORARILY_REJECTED,
+    MAV_STATE_ACTIVE,
+    MAV_STATE_CRITICAL,
+    MAV_STATE_STANDBY,
+)
 from companion.mavlink.streams import RateMonitor, stream_requests
 from companion.types import (
     Alert,
@@ -41,13 +49,6 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
-MAV_CMD_USER_1 = 31010
-"""The heading-confirmation command (see companion.mavlink.decode)."""
-MAV_RESULT_ACCEPTED = 0
-MAV_RESULT_TEMPORARILY_REJECTED = 1
-MAV_STATE_STANDBY = 3
-MAV_STATE_ACTIVE = 4
-MAV_STATE_CRITICAL = 5
 RATE_CHECK_PERIOD_S = 10.0
 """How often the received rates are compared with the requested ones (autopilot time)."""
 STREAM_NEEDS: dict[str, tuple[str, ...]] = {

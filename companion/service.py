@@ -3,7 +3,7 @@
 Tasks:
 
 * one reader per link (the autopilot, and the ground station if configured):
-  bytes -> :class:`~companion.mavlink.frames.FrameParser` -> pipeline -> frames
+  bytes -> :class:`~companion.mavlink.framing.FrameParser` -> pipeline -> frames
   sent to every open link and to the flight recorder. A link that drops is
   re-opened every ``reconnect_s`` until it comes back (a serial adapter
   unplugged and plugged in again, a TCP peer restarting).
@@ -33,7 +33,7 @@ from pathlib import Path
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, open_link
 from companion.notify import SystemdNotifier
 from companion.pipeline import Pipeline

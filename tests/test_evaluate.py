@@ -27,6 +27,7 @@ from companion.evaluate import (
     evaluate,
 )
 from companion.mavlink import units
+from companion.mavlink.ids import MAV_COMP_ID_AUTOPILOT1, MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.nav.earth import radii_of_curvature_m
 
 EPOCH0_S = 1_700_000_000.0
@@ -138,26 +139,26 @@ def publish_solutions(
             int(round(v[2])),
             hdg,
         )
-        out.append((t, gpi, units.MAV_COMP_ID_ONBOARD_COMPUTER))
+        out.append((t, gpi, MAV_COMP_ID_ONBOARD_COMPUTER))
         if h_acc_m is not None:
             gin = mavlink2.MAVLink_gps_input_message(
                 int(round(t * units.US_PER_S)), 0, 0, 0, 0, 3, lat_e7, lon_e7, float(alt),
                 1.0, 1.0, *(float(x) for x in truth.vel_ned_mps[i]), 0.1, h_acc_m, v_acc_m, 12,
             )  # fmt: skip
-            out.append((t, gin, units.MAV_COMP_ID_ONBOARD_COMPUTER))
+            out.append((t, gin, MAV_COMP_ID_ONBOARD_COMPUTER))
     return out
 
 
 def statustext(t_s: float, text: str, severity: int = 4) -> tuple[float, object, int]:
     msg = mavlink2.MAVLink_statustext_message(severity, text.encode("utf-8"), 0, 0)
-    return (t_s, msg, units.MAV_COMP_ID_ONBOARD_COMPUTER)
+    return (t_s, msg, MAV_COMP_ID_ONBOARD_COMPUTER)
 
 
 def named_value(t_s: float, name: str, value: float) -> tuple[float, object, int]:
     msg = mavlink2.MAVLink_named_value_float_message(
         int(round(t_s * units.MS_PER_S)), name.encode(), value
     )
-    return (t_s, msg, units.MAV_COMP_ID_ONBOARD_COMPUTER)
+    return (t_s, msg, MAV_COMP_ID_ONBOARD_COMPUTER)
 
 
 def write_tlog(path: Path, items: Sequence[tuple[float, object, int]]) -> Path:
@@ -449,7 +450,7 @@ def test_corrupt_records_are_skipped_and_counted(tmp_path: Path, truth: Truth) -
 def test_only_component_191_is_scored(tmp_path: Path, truth: Truth) -> None:
     ours = publish_solutions(truth, h_acc_m=None)
     theirs = [
-        (t, m, units.MAV_COMP_ID_AUTOPILOT1)
+        (t, m, MAV_COMP_ID_AUTOPILOT1)
         for t, m, _ in publish_solutions(truth, lambda t: (50.0, 0.0, 0.0), h_acc_m=None)
     ]
     ev = run(tmp_path, truth, ours + theirs + [(20.0, statustext(20.0, "CMP FAULT x")[1], 1)])

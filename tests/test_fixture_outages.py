@@ -1,4 +1,4 @@
-"""Issue 4's outage acceptance on the bundled flights: stale fixes are flagged within 2 s
+"""The outage acceptance on the bundled flights: stale fixes are flagged within 2 s
 and never fused, and after every outage the first fix fused has passed the gate."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from companion.types import AlertCode, NavMode
 
 FIXTURES = Path(__file__).resolve().parent.parent / "sitl_fixtures"
 STALE_WITHIN_S = 2.0
-"""The issue's bound on the GNSS_STALE delay."""
+"""The acceptance bound on the GNSS_STALE delay, s."""
 
 
 @dataclass(frozen=True)

@@ -13,8 +13,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.config import Config
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.mavlink.tlog import TlogReader
-from companion.mavlink.units import CDEG_PER_RAD, MAV_COMP_ID_ONBOARD_COMPUTER
+from companion.mavlink.units import CDEG_PER_RAD
 from companion.pipeline import Pipeline
 from companion.types import AlertCode
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.image import imread
 
-from companion.report import plot_evaluation
+from companion.evaluate.plot import plot_evaluation
 from tests.test_evaluate import event_case, make_truth
 
 

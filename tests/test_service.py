@@ -23,9 +23,9 @@ from pathlib import Path
 import pytest
 
 from companion.config import Config, LinkConfig
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.mavlink.tlog import TlogReader
-from companion.mavlink.units import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.service import Service
 
 ROOT = Path(__file__).resolve().parent.parent

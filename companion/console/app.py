@@ -5,7 +5,8 @@
 only the service's messages (component 191) and redraws a status screen twice
 a second: position and accuracy, the navigation mode and outage time, the
 protection levels against what the service publishes, the heading correction,
-and the latest ``CMP`` alerts with their severity.
+and the latest ``CMP`` alerts with their severity. The messages are read back
+with :mod:`companion.mavlink.readback`, as ``companion evaluate`` reads them.
 
 ``--once`` prints one screen after the first published solution (or after
 ``--duration``) and exits: handy in scripts and tests.
@@ -21,18 +22,30 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import LinkError, open_link
-from companion.mavlink.units import (
-    CDEG_PER_RAD,
-    DEGE7_PER_RAD,
-    MAV_COMP_ID_ONBOARD_COMPUTER,
-    MM_PER_M,
-    UINT16_UNKNOWN,
+from companion.mavlink.readback import (
+    PublishedFix,
+    PublishedHeartbeat,
+    PublishedPosition,
+    PublishedText,
+    from_service,
+    read_message,
 )
+from companion.types import NamedValue, Severity
 
 REDRAW_S = 0.5
-SEVERITY_NAMES = ("EMERG", "ALERT", "CRIT", "ERROR", "WARN", "NOTICE", "INFO", "DEBUG")
+SEVERITY_NAMES: dict[int, str] = {
+    Severity.EMERGENCY: "EMERG",
+    Severity.ALERT: "ALERT",
+    Severity.CRITICAL: "CRIT",
+    Severity.ERROR: "ERROR",
+    Severity.WARNING: "WARN",
+    Severity.NOTICE: "NOTICE",
+    Severity.INFO: "INFO",
+    Severity.DEBUG: "DEBUG",
+}
+"""Short names of the STATUSTEXT severities on the screen."""
 FIX_NAMES = ("no GPS", "no fix", "2D", "3D", "DGPS", "RTK float", "RTK fixed", "static", "PPP")
 
 
@@ -54,29 +67,25 @@ class ConsoleState:
 
     def take(self, msg: Any, t_rx_s: float) -> bool:
         """Update from one message; False if it is not the service's."""
-        if msg.get_srcComponent() != MAV_COMP_ID_ONBOARD_COMPUTER:
+        if not from_service(msg):
             return False
         self.messages += 1
         self.last_rx_s = t_rx_s
-        kind = msg.get_type()
-        if kind == "GLOBAL_POSITION_INT":
-            self.lat_deg = math.degrees(msg.lat / DEGE7_PER_RAD)
-            self.lon_deg = math.degrees(msg.lon / DEGE7_PER_RAD)
-            self.alt_msl_m = msg.alt / MM_PER_M
-            self.speed_mps = math.hypot(msg.vx, msg.vy) / 100.0
-            self.hdg_deg = (
-                None if msg.hdg == UINT16_UNKNOWN else math.degrees(msg.hdg / CDEG_PER_RAD)
-            )
-        elif kind == "GPS_INPUT":
-            self.fix_type = int(msg.fix_type)
-        elif kind == "NAMED_VALUE_FLOAT":
-            name = msg.name if isinstance(msg.name, str) else msg.name.decode(errors="replace")
-            self.values[name.rstrip("\x00")] = float(msg.value)
-        elif kind == "STATUSTEXT":
-            text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
-            sev = SEVERITY_NAMES[msg.severity] if msg.severity < len(SEVERITY_NAMES) else "?"
-            self.alerts.append((t_rx_s, sev, text.rstrip("\x00")))
-        elif kind == "HEARTBEAT":
+        item = read_message(msg)
+        if isinstance(item, PublishedPosition):
+            self.lat_deg = math.degrees(item.lat_rad)
+            self.lon_deg = math.degrees(item.lon_rad)
+            self.alt_msl_m = item.alt_msl_m
+            self.speed_mps = math.hypot(item.vel_ned_mps[0], item.vel_ned_mps[1])
+            self.hdg_deg = None if item.yaw_rad is None else math.degrees(item.yaw_rad)
+        elif isinstance(item, PublishedFix):
+            self.fix_type = item.fix_type
+        elif isinstance(item, NamedValue):
+            self.values[item.name] = item.value
+        elif isinstance(item, PublishedText):
+            sev = SEVERITY_NAMES.get(item.severity, "?")
+            self.alerts.append((t_rx_s, sev, item.text))
+        elif isinstance(item, PublishedHeartbeat):
             self.heartbeats += 1
         return True
 

@@ -21,17 +21,18 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from companion.mavlink.frames import load_dialect
+from companion.mavlink.dialect import load_dialect
+from companion.mavlink.ids import (
+    MAV_CMD_SET_MESSAGE_INTERVAL,
+    MAV_DATA_STREAM_EXTENDED_STATUS,
+    MAV_DATA_STREAM_EXTRA1,
+    MAV_DATA_STREAM_EXTRA2,
+    MAV_DATA_STREAM_EXTRA3,
+    MAV_DATA_STREAM_POSITION,
+    MAV_DATA_STREAM_RAW_SENSORS,
+)
 from companion.mavlink.units import US_PER_S
 from companion.types import AutopilotFlavour
-
-MAV_CMD_SET_MESSAGE_INTERVAL = 511
-MAV_DATA_STREAM_RAW_SENSORS = 1
-MAV_DATA_STREAM_EXTENDED_STATUS = 2
-MAV_DATA_STREAM_POSITION = 6
-MAV_DATA_STREAM_EXTRA1 = 10
-MAV_DATA_STREAM_EXTRA2 = 11
-MAV_DATA_STREAM_EXTRA3 = 12
 
 DATA_STREAM_OF: dict[str, int] = {
     "RAW_IMU": MAV_DATA_STREAM_RAW_SENSORS,

@@ -37,17 +37,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, BinaryIO
 
-from companion.mavlink.fastdecode import FastDecoder
-from companion.mavlink.frames import (
-    CRC_LEN,
-    FRAME_BAD,
-    FRAME_NEED_MORE,
-    HEADER_LEN_V2,
-    STX_V1,
-    STX_V2,
-    load_dialect,
-    try_frame,
-)
+from companion.mavlink.dialect import load_dialect
+from companion.mavlink.framing import FRAME_BAD, FRAME_NEED_MORE, try_frame
+from companion.mavlink.ids import CRC_LEN, HEADER_LEN_V2, STX_V1, STX_V2
+from companion.mavlink.messages import FastDecoder
 from companion.mavlink.units import US_PER_S
 
 logger = logging.getLogger(__name__)
@@ -79,8 +72,8 @@ class TlogReader:
         Consecutive mutually consistent skipped records after which the reader
         accepts that the recording clock stepped.
     light_ids
-        Message ids yielded as :class:`~companion.mavlink.fastdecode.LightMessage`
-        (fields, header and pymavlink's few accessors, built at a third of the cost)
+        Message ids yielded as :class:`~companion.mavlink.messages.LightMessage`
+        (fields, header and pymavlink's few accessors, cheaper to build)
         rather than pymavlink objects: for consumers known to read only those, such as
         :class:`companion.mavlink.decode.Decoder` with
         :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`. Default: none.

@@ -2,9 +2,10 @@
 
 Every integer scaling MAVLink uses (1e7 degrees, mm, cm/s, mG, mrad/s,
 centidegrees, "unknown" sentinels) lives here, and is applied only in
-:mod:`companion.mavlink.decode`, :mod:`companion.mavlink.encode` and the
-simulator's autopilot writer (which must speak the autopilot's dialect).
-The core never sees a MAVLink unit.
+:mod:`companion.mavlink` (decode, encode, and readback of what we published)
+and the simulator's autopilot writer (which must speak the autopilot's
+dialect). The core never sees a MAVLink unit. Message ids and enum values are
+in :mod:`companion.mavlink.ids`.
 """
 
 from __future__ import annotations
@@ -37,6 +38,3 @@ UINT8_UNKNOWN = 255
 EPOCH_USEC_THRESHOLD = 1_000_000_000_000_000
 """A time_usec above this (about 31.7 years) is UNIX epoch time, not time since boot
 (MAVLink: 'the receiving end can infer timestamp format by checking the magnitude')."""
-
-MAV_COMP_ID_AUTOPILOT1 = 1
-MAV_COMP_ID_ONBOARD_COMPUTER = 191

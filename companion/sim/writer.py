@@ -25,6 +25,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from companion.mavlink import units
+from companion.mavlink.ids import MAV_COMP_ID_AUTOPILOT1
 from companion.nav.grades import IMU_GRADES
 from companion.sim.flight import SimFlight, _lla
 from companion.sim.scenarios import describe
@@ -40,7 +41,7 @@ TRUTH_COLUMNS = (
 
 def tlog_bytes(flight: SimFlight) -> bytes:
     """The .tlog image of a flight's messages (deterministic)."""
-    link = mav.MAVLink(None, srcSystem=1, srcComponent=units.MAV_COMP_ID_AUTOPILOT1)
+    link = mav.MAVLink(None, srcSystem=1, srcComponent=MAV_COMP_ID_AUTOPILOT1)
     link.robust_parsing = True
     chunks: list[bytes] = []
     pack_q = struct.Struct(">Q").pack

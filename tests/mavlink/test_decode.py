@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.mavlink import units
-from companion.mavlink.decode import MAV_CMD_USER_1, Decoder, DecoderConfig
+from companion.mavlink.decode import Decoder, DecoderConfig
+from companion.mavlink.ids import MAV_CMD_USER_1
 from companion.nav.rotations import euler_to_quat
 from companion.types import (
     AttitudeSample,
@@ -577,3 +578,20 @@ def test_stale_gnss_time_during_outage_is_not_a_reboot() -> None:
     assert d.reboots == 0
     assert d.rejections["time_backwards"] == 0
     assert d.last_t_s == pytest.approx(19.98)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"system_id": 0}, r"system_id must be in \[1, 255\], got 0"),
+        ({"max_speed_mps": -1.0}, r"max_speed_mps must be > 0, got -1.0"),
+        ({"gnss_delay_s": 2.0}, r"gnss_delay_s must be in \[0, 1\], got 2.0"),
+        ({"system_time_wait_s": 61.0}, r"system_time_wait_s must be in \[0, 60\], got 61.0"),
+        ({"reboot_backjump_s": 0.0}, r"reboot_backjump_s must be > 0, got 0.0"),
+        ({"alt_min_m": 10.0, "alt_max_m": 0.0}, r"alt_min_m must be < alt_max_m"),
+    ],
+)
+def test_config_rejections_name_the_field(kwargs: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        DecoderConfig(**kwargs)
+    assert DecoderConfig(system_id=None).system_id is None

@@ -12,7 +12,8 @@ from pymavlink.dialects.v20 import development as dev
 from companion.mavlink import units
 from companion.mavlink.decode import Decoder
 from companion.mavlink.encode import Encoder, EncoderConfig
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
 from companion.types import (
     Alert,
     AlertCode,
@@ -59,7 +60,7 @@ def roundtrip(enc: Encoder, msgs: list, module: object = apm) -> list:
     assert p.bad_frames == 0 and len(out) == len(msgs)
     for m in out:
         assert m.get_srcSystem() == enc.system_id
-        assert m.get_srcComponent() == units.MAV_COMP_ID_ONBOARD_COMPUTER
+        assert m.get_srcComponent() == MAV_COMP_ID_ONBOARD_COMPUTER
     return out
 
 
@@ -226,3 +227,20 @@ def test_gps_input_yaw_is_off_by_default() -> None:
     """The autopilot would fuse GPS_INPUT.yaw as a GNSS heading: only when configured."""
     gpi, gin = Encoder().encode(solution(yaw=0.3), AutopilotFlavour.ARDUPILOT)
     assert gin.yaw == 0 and gpi.hdg != 65535
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"output": "bogus"}, r"output must be one of \['auto', 'gps_input'"),
+        ({"gps_id": 256}, r"gps_id must be in \[0, 255\], got 256"),
+        ({"uere_m": math.inf}, r"uere_m must be > 0, got inf"),
+        ({"min_h_acc_m": 0.0}, r"min_h_acc_m must be > 0, got 0.0"),
+        ({"statustext_min_interval_s": -1.0}, r"statustext_min_interval_s must be >= 0"),
+        ({"statustext_interval_overrides": (("NOPE", 1.0),)}, r"unknown alert code 'NOPE'"),
+        ({"dialect": "nope"}, r"unknown MAVLink dialect 'nope'"),
+    ],
+)
+def test_config_rejections_name_the_field(kwargs: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        EncoderConfig(**kwargs)

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from companion.mavlink.encode import Encoder, EncoderConfig, _pack_plan
+from companion.mavlink.encode import Encoder, EncoderConfig
+from companion.mavlink.encode.packing import _pack_plan
 from companion.types import (
     Alert,
     AlertCode,
@@ -21,7 +22,7 @@ from companion.types import (
     Severity,
 )
 from tests.mavlink.test_encode import solution
-from tests.mavlink.test_fastdecode import _raw_frame
+from tests.mavlink.test_messages import _raw_frame
 
 
 def test_every_plain_message_packs_like_pymavlink() -> None:
@@ -39,7 +40,7 @@ def test_every_plain_message_packs_like_pymavlink() -> None:
             frame = _raw_frame(msg_id, bytes(payload), cls.crc_extra)
             msg_a = rx.decode(bytearray(frame))
             msg_b = rx.decode(bytearray(frame))
-            ref.seq = enc._mav.seq
+            ref.seq = enc._packer.mav.seq
             got = enc.pack(msg_a)
             want = bytes(msg_b.pack(ref))
             assert got == want, cls.msgname
@@ -118,10 +119,10 @@ def test_encode_frames_is_encode_then_pack(
 def test_encode_frames_signing_falls_back_to_pymavlink() -> None:
     a, b = Encoder(system_id=3), Encoder(system_id=3)
     for enc in (a, b):
-        enc._mav.signing.sign_outgoing = True
-        enc._mav.signing.secret_key = bytes(32)
-        enc._mav.signing.link_id = 0
-        enc._mav.signing.timestamp = 1
+        enc._packer.mav.signing.sign_outgoing = True
+        enc._packer.mav.signing.secret_key = bytes(32)
+        enc._packer.mav.signing.link_id = 0
+        enc._packer.mav.signing.timestamp = 1
     sol = solution()
     want = [(m.get_type(), a.pack(m)) for m in a.encode(sol, AutopilotFlavour.ARDUPILOT)]
     got = b.encode_frames(sol, AutopilotFlavour.ARDUPILOT)

@@ -20,8 +20,8 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS, Decoder
-from companion.mavlink.fastdecode import FastDecoder, LightMessage
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.messages import FastDecoder, LightMessage
 from companion.mavlink.tlog import TlogReader
 from tests.mavlink._util import Packer, attitude, heartbeat, raw_imu
 

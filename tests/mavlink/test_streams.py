@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
 from companion.mavlink.streams import RateMonitor, stream_requests
 from companion.types import AutopilotFlavour
 from tests.mavlink._util import Packer

@@ -7,9 +7,9 @@ framing instead and, when a candidate frame fails (bad CRC, bad header,
 message id unknown to the dialect, truncated), it resynchronises one byte
 later. The decoding and CRC check of a candidate are pymavlink's
 (``MAVLink.decode``), so what is accepted is exactly what pymavlink accepts;
-the common frames go through :class:`~companion.mavlink.fastdecode.FastDecoder`,
+the common frames go through :class:`~companion.mavlink.messages.FastDecoder`,
 which builds the same message objects from pymavlink's own message
-definitions at a third of the cost (anything it does not handle still goes to
+definitions, more cheaply (anything it does not handle still goes to
 ``MAVLink.decode``).
 
 Counting convention: ``bad_frames`` counts *bad regions*, a maximal run of
@@ -26,26 +26,24 @@ https://mavlink.io/en/guide/serialization.html
 
 from __future__ import annotations
 
-import importlib
 import logging
 import re
 from collections.abc import Collection
-from types import ModuleType
 from typing import Any
 
-from companion.mavlink.fastdecode import FastDecoder
+from companion.mavlink.dialect import load_dialect
+from companion.mavlink.ids import (
+    CRC_LEN,
+    HEADER_LEN_V1,
+    HEADER_LEN_V2,
+    IFLAG_SIGNED,
+    SIGNATURE_LEN,
+    STX_V1,
+    STX_V2,
+)
+from companion.mavlink.messages import FastDecoder
 
 logger = logging.getLogger(__name__)
-
-STX_V1 = 0xFE
-STX_V2 = 0xFD
-HEADER_LEN_V1 = 6
-HEADER_LEN_V2 = 10
-CRC_LEN = 2
-SIGNATURE_LEN = 13
-IFLAG_SIGNED = 0x01
-MAX_FRAME_LEN = HEADER_LEN_V2 + 255 + CRC_LEN + SIGNATURE_LEN
-"""Longest possible MAVLink frame, bytes."""
 
 _STX_RE = re.compile(b"[\xfd\xfe]")
 
@@ -53,22 +51,6 @@ _STX_RE = re.compile(b"[\xfd\xfe]")
 FRAME_OK = 0
 FRAME_NEED_MORE = 1
 FRAME_BAD = 2
-
-
-def load_dialect(dialect: str) -> ModuleType:
-    """Import ``pymavlink.dialects.v20.<dialect>``.
-
-    Raises
-    ------
-    ValueError
-        If the dialect is not one pymavlink ships.
-    """
-    if not dialect.isidentifier():
-        raise ValueError(f"invalid MAVLink dialect name {dialect!r}")
-    try:
-        return importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
-    except ImportError as exc:
-        raise ValueError(f"unknown MAVLink dialect {dialect!r}") from exc
 
 
 def frame_length(buf: bytes | bytearray, pos: int) -> int:
@@ -111,12 +93,12 @@ def try_frame(
     pos
         Index of the STX byte.
     fast
-        Optional :class:`~companion.mavlink.fastdecode.FastDecoder` of the same
+        Optional :class:`~companion.mavlink.messages.FastDecoder` of the same
         dialect: it decodes the common frames to the very objects pymavlink would
         build, faster; whatever it declines goes to ``mav.decode``.
     light
         With ``fast``: light messages for the fast decoder's ``light_ids``
-        (:meth:`~companion.mavlink.fastdecode.FastDecoder.light_decode_at`).
+        (:meth:`~companion.mavlink.messages.FastDecoder.light_decode_at`).
 
     Returns
     -------
@@ -155,7 +137,7 @@ class FrameParser:
     dialect
         pymavlink v2.0 dialect module name (``ardupilotmega`` by default).
     light_ids
-        Message ids returned as :class:`~companion.mavlink.fastdecode.LightMessage`
+        Message ids returned as :class:`~companion.mavlink.messages.LightMessage`
         rather than pymavlink objects, for consumers known to read only what it has
         (see :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`). Default: none.
 

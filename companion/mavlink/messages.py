@@ -1,7 +1,7 @@
-"""Fast path of pymavlink's ``MAVLink.decode`` for the common case of a frame.
+"""MAVLink message objects from frames: a fast path of pymavlink's ``MAVLink.decode``.
 
-:func:`companion.mavlink.frames.try_frame` hands every candidate frame to
-pymavlink's ``MAVLink.decode``, which spends most of its ~10 us per message on
+:func:`companion.mavlink.framing.try_frame` hands every candidate frame to
+pymavlink's ``MAVLink.decode``, which spends most of its time per message on
 generic bookkeeping. :class:`FastDecoder` does the same work for an unsigned
 MAVLink 2 frame of a message the dialect knows, with what pymavlink generated
 for that message (its ``unpacker`` struct, ``orders``, ``lengths``,
@@ -12,13 +12,13 @@ attributes (fields, ``_header``, ``_msgbuf``, ``_payload``, ``_crc``,
 
 :meth:`FastDecoder.message_at` returns the message alone (the tlog reader knows
 the length of such a frame from its header); :meth:`FastDecoder.decode_at` adds the
-frame length, for :func:`companion.mavlink.frames.try_frame`.
+frame length, for :func:`companion.mavlink.framing.try_frame`.
 
 Everything else -- MAVLink 1 frames, signed frames, a CRC mismatch (so that
 pymavlink raises its own error), ``MAV_IGNORE_CRC`` set -- goes to pymavlink
 (:meth:`FastDecoder.decode` returns None and the caller falls back).
 Truncated MAVLink 2 payloads (trailing zero bytes dropped by the sender) are
-zero-extended exactly as pymavlink does. ``tests/mavlink/test_fastdecode.py``
+zero-extended exactly as pymavlink does. ``tests/mavlink/test_messages.py``
 checks field-for-field equality with pymavlink on every message of every
 fixture and on hand-made odd frames.
 
@@ -57,9 +57,8 @@ from collections.abc import Callable, Collection
 from types import ModuleType
 from typing import Any
 
-STX_V2 = 0xFD
-HEADER_LEN_V2 = 10
-CRC_LEN = 2
+from companion.mavlink.ids import CRC_LEN, HEADER_LEN_V2, STX_V2
+
 _CRC_INIT = 0xFFFF
 
 

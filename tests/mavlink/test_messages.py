@@ -9,8 +9,9 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from companion.mavlink.fastdecode import FastDecoder
-from companion.mavlink.frames import FrameParser, load_dialect
+from companion.mavlink.dialect import load_dialect
+from companion.mavlink.framing import FrameParser
+from companion.mavlink.messages import FastDecoder
 from tests.mavlink._util import Packer, attitude, heartbeat, raw_imu
 
 FIXTURES = Path(__file__).resolve().parents[2] / "sitl_fixtures"

@@ -13,9 +13,7 @@
 
 Matplotlib is used through its object API on an Agg canvas (no pyplot global state).
 
-References
-----------
-DESIGN.md, replay and evaluation contract.
+See ``docs/replay.md`` for the replay and evaluation contract.
 """
 
 from __future__ import annotations
@@ -28,7 +26,8 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from companion.evaluate import FALSE_ALERT_CODES, Evaluation
+from companion.evaluate.results import Evaluation
+from companion.evaluate.score import FALSE_ALERT_CODES
 
 _log = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
-from companion.mavlink.frames import FrameParser
+from companion.mavlink.framing import FrameParser
 from tests.mavlink._util import Packer, attitude, gps_raw, heartbeat, raw_imu
 
 

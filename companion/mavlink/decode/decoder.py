@@ -1,0 +1,279 @@
+"""The decoder: dispatch by message id, the system id filter, the heading command, counting.
+
+:class:`Decoder` hands each message to its kind's handler (:mod:`.gnss`,
+:mod:`.inertial`, :mod:`.vehicle`, SYSTEM_TIME to :mod:`.clock`) after the
+checks every message passes:
+
+* anything from our own component (191) is ignored (``own_message``);
+* until the system id is known (configured, or locked by the first autopilot
+  HEARTBEAT) every other message is rejected ``no_system_yet``; afterwards
+  messages of other systems are rejected ``wrong_sysid`` (except the heading
+  command);
+* COMMAND_LONG ``MAV_CMD_USER_1`` (31010) addressed to our system (or
+  broadcast) and to component 191 (or broadcast), from anyone, is the
+  **heading-confirmation command**: ``param1 == 1`` ->
+  ``HeadingCommand(apply=True)``, ``param1 == 0`` -> ``HeadingCommand(apply=False)``;
+  any other value is rejected (``bad_command_param``), a command for another
+  component ``not_for_us``.
+
+A message whose fields cannot be read is ``corrupt_frame``; a rejected message
+yields no sample, and exactly one counter (``accepted`` or ``rejections``)
+moves per call of :meth:`Decoder.decode`.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Callable
+from typing import Any
+
+from companion.mavlink.decode.clock import BootClock
+from companion.mavlink.decode.config import DecoderConfig
+from companion.mavlink.decode.gnss import GnssDecoder
+from companion.mavlink.decode.inertial import InertialDecoder
+from companion.mavlink.decode.rejections import Rejected, count_rejection
+from companion.mavlink.decode.vehicle import VehicleDecoder
+from companion.mavlink.ids import (
+    MAV_CMD_USER_1,
+    MAVLINK_MSG_ID_ATTITUDE,
+    MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+    MAVLINK_MSG_ID_COMMAND_LONG,
+    MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+    MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+    MAVLINK_MSG_ID_GPS2_RAW,
+    MAVLINK_MSG_ID_GPS2_RTK,
+    MAVLINK_MSG_ID_GPS_RAW_INT,
+    MAVLINK_MSG_ID_GPS_RTK,
+    MAVLINK_MSG_ID_HEARTBEAT,
+    MAVLINK_MSG_ID_HIGHRES_IMU,
+    MAVLINK_MSG_ID_RAW_IMU,
+    MAVLINK_MSG_ID_SCALED_IMU,
+    MAVLINK_MSG_ID_SCALED_IMU2,
+    MAVLINK_MSG_ID_SCALED_IMU3,
+    MAVLINK_MSG_ID_SYSTEM_TIME,
+    MAVLINK_MSG_ID_VFR_HUD,
+)
+from companion.types import AutopilotFlavour, HeadingCommand, Sample
+
+LIGHT_MESSAGE_IDS = frozenset(
+    {
+        MAVLINK_MSG_ID_SYSTEM_TIME,
+        MAVLINK_MSG_ID_GPS_RAW_INT,
+        MAVLINK_MSG_ID_GPS2_RAW,
+        MAVLINK_MSG_ID_GPS_RTK,
+        MAVLINK_MSG_ID_GPS2_RTK,
+        MAVLINK_MSG_ID_RAW_IMU,
+        MAVLINK_MSG_ID_SCALED_IMU,
+        MAVLINK_MSG_ID_SCALED_IMU2,
+        MAVLINK_MSG_ID_SCALED_IMU3,
+        MAVLINK_MSG_ID_HIGHRES_IMU,
+        MAVLINK_MSG_ID_ATTITUDE,
+        MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+        MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
+        MAVLINK_MSG_ID_VFR_HUD,
+        MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+    }
+)
+"""The messages :meth:`Decoder.decode` takes as
+:class:`~companion.mavlink.messages.LightMessage` as well as pymavlink objects (its
+handlers read only fields, ``_header``, ``_type``, ``get_type()`` and ``get_msgId()``).
+What receives them besides the decoder must read no more (the pipeline reads
+``_type``; the service's recorder ``get_msgbuf()``)."""
+
+
+class Decoder:
+    """Stateful MAVLink-to-sample decoder (clock reconstruction, validation, counting).
+
+    Parameters
+    ----------
+    config
+        Limits and the system id policy.
+
+    Attributes
+    ----------
+    rejections : collections.Counter[str]
+        Reason -> count of messages (or frames) not turned into samples.
+    accepted : collections.Counter[str]
+        Message type -> count of messages turned into samples.
+    """
+
+    def __init__(self, config: DecoderConfig | None = None) -> None:
+        self.config = config if config is not None else DecoderConfig()
+        self.rejections: collections.Counter[str] = collections.Counter()
+        self.accepted: collections.Counter[str] = collections.Counter()
+        c = self.config
+        self._clock = clock = BootClock(c)
+        self._vehicle = vehicle = VehicleDecoder(c, clock)
+        gnss = GnssDecoder(c, clock)
+        inertial = InertialDecoder(c, clock)
+        self._own_comp = c.own_component
+        self._handlers: dict[int, Callable[[Any, float], Sample | None]] = {
+            MAVLINK_MSG_ID_SYSTEM_TIME: clock.system_time,
+            MAVLINK_MSG_ID_GPS_RAW_INT: gnss.gps_raw,
+            MAVLINK_MSG_ID_GPS2_RAW: gnss.gps2_raw,
+            MAVLINK_MSG_ID_GPS_RTK: gnss.gps_rtk,
+            MAVLINK_MSG_ID_GPS2_RTK: gnss.gps_rtk,
+            MAVLINK_MSG_ID_RAW_IMU: inertial.raw_imu,
+            MAVLINK_MSG_ID_SCALED_IMU: inertial.scaled_imu,
+            MAVLINK_MSG_ID_SCALED_IMU2: inertial.scaled_imu,
+            MAVLINK_MSG_ID_SCALED_IMU3: inertial.scaled_imu,
+            MAVLINK_MSG_ID_HIGHRES_IMU: inertial.highres_imu,
+            MAVLINK_MSG_ID_ATTITUDE: inertial.attitude,
+            MAVLINK_MSG_ID_ATTITUDE_QUATERNION: inertial.attitude_quaternion,
+            MAVLINK_MSG_ID_EXTENDED_SYS_STATE: vehicle.extended_sys_state,
+            MAVLINK_MSG_ID_VFR_HUD: vehicle.vfr_hud,
+            MAVLINK_MSG_ID_GLOBAL_POSITION_INT: vehicle.global_position_int,
+        }
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def flavour(self) -> AutopilotFlavour:
+        """From the autopilot's HEARTBEAT (3 -> ARDUPILOT, 12 -> PX4)."""
+        return self._vehicle.flavour
+
+    @property
+    def system_id(self) -> int | None:
+        """The autopilot's system id (configured or locked)."""
+        return self._vehicle.system_id
+
+    @property
+    def autopilot_component(self) -> int | None:
+        """Component of the locked autopilot HEARTBEAT."""
+        return self._vehicle.autopilot_component
+
+    @property
+    def reboots(self) -> int:
+        """Reboots detected."""
+        return self._clock.reboots
+
+    @property
+    def last_t_s(self) -> float | None:
+        """Latest autopilot boot-clock time seen, s."""
+        return self._clock.last_t_s
+
+    @property
+    def epoch_offset_s(self) -> float | None:
+        """Current UNIX-epoch minus boot-clock offset estimate, s."""
+        return self._clock.epoch_offset_s
+
+    # ------------------------------------------------------------------ public
+
+    def decode(self, msg: Any, t_rx_s: float) -> list[Sample]:
+        """Turn one message into 0..n samples (a RebootEvent may precede the sample).
+
+        Parameters
+        ----------
+        msg
+            A pymavlink message (BAD_DATA messages are counted ``corrupt_frame``).
+        t_rx_s
+            Reception time (wall or log time), s; kept for latency only.
+
+        Returns
+        -------
+        list
+            Samples, possibly empty. Never raises on bad input.
+        """
+        try:
+            hdr = msg._header  # pymavlink's MAVLink_header (faster than get_header())
+            msg_id = hdr.msgId
+            src_sys = hdr.srcSystem
+            src_comp = hdr.srcComponent
+        except AttributeError:  # not a decoded pymavlink message
+            self._reject("corrupt_frame")
+            return []
+        handler = self._handlers.get(msg_id)
+        if handler is None:
+            return self._unhandled(msg, msg_id, src_sys, src_comp, t_rx_s)
+        if src_comp == self._own_comp:
+            self._reject("own_message")
+            return []
+        system_id = self._vehicle.system_id
+        if src_sys != system_id:
+            self._reject("no_system_yet" if system_id is None else "wrong_sysid")
+            return []
+        try:
+            sample = handler(msg, t_rx_s)
+        except Rejected as exc:
+            self._reject(exc.args[0])
+            return self._take_pending()
+        except (TypeError, ValueError, AttributeError, OverflowError):
+            self._reject("corrupt_frame")
+            return self._take_pending()
+        self.accepted[msg._type] += 1
+        clock = self._clock
+        if clock.pending:
+            out = clock.pending
+            clock.pending = []
+            if sample is not None:
+                out.append(sample)
+            return out
+        return [sample] if sample is not None else []
+
+    def bad_frame(self, count: int = 1) -> None:
+        """Count ``count`` corrupt frames reported by the parser (reason ``corrupt_frame``)."""
+        if count > 0:
+            self._reject("corrupt_frame", count)
+
+    # ------------------------------------------------------------------ internals
+
+    def _unhandled(
+        self, msg: Any, msg_id: int, src_sys: int, src_comp: int, t_rx_s: float
+    ) -> list[Sample]:
+        """Messages without a sample handler: BAD_DATA, HEARTBEAT, COMMAND_LONG, the rest."""
+        if msg_id < 0:
+            self._reject("corrupt_frame")
+            return []
+        if src_comp == self._own_comp:
+            self._reject("own_message")
+            return []
+        if msg_id == MAVLINK_MSG_ID_HEARTBEAT:
+            try:
+                heartbeat = self._vehicle.heartbeat(msg, src_sys, src_comp, t_rx_s)
+            except Rejected as exc:
+                self._reject(exc.args[0])
+                return []
+            self.accepted["HEARTBEAT"] += 1
+            return [heartbeat]
+        if msg_id == MAVLINK_MSG_ID_COMMAND_LONG:
+            return self._command_long(msg, t_rx_s)
+        self._reject("unhandled_type")
+        return []
+
+    def _command_long(self, msg: Any, t_rx_s: float) -> list[Sample]:
+        """The heading-confirmation command, if ``msg`` is one addressed to us."""
+        if msg.command != MAV_CMD_USER_1:
+            self._reject("unhandled_type")
+            return []
+        if msg.target_system not in (0, self._vehicle.system_id) or msg.target_component not in (
+            0,
+            self._own_comp,
+        ):
+            self._reject("not_for_us")
+            return []
+        p1 = msg.param1
+        if p1 == 1.0:
+            apply = True
+        elif p1 == 0.0:
+            apply = False
+        else:
+            self._reject("bad_command_param")
+            return []
+        t_s = self._clock.last_t_s
+        if t_s is None:
+            self._reject("no_time_yet")
+            return []
+        self.accepted["COMMAND_LONG"] += 1
+        return [HeadingCommand(t_s=t_s, t_rx_s=t_rx_s, apply=apply)]
+
+    def _take_pending(self) -> list[Sample]:
+        """A RebootEvent found before a message was rejected is still reported."""
+        clock = self._clock
+        if not clock.pending:
+            return []
+        out = clock.pending
+        clock.pending = []
+        return out
+
+    def _reject(self, reason: str, count: int = 1) -> None:
+        count_rejection(self.rejections, reason, count)

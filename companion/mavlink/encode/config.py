@@ -1,0 +1,62 @@
+"""The encoder's settings: which solution message, accuracy floors, alert rate limits, dialect."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from companion.mavlink.dialect import load_dialect
+from companion.ranges import check_ranges, ranged
+from companion.types import AlertCode
+
+OUTPUTS = ("auto", "gps_input", "global_position_sensor")
+"""Choices of ``EncoderConfig.output``."""
+
+
+@dataclass(frozen=True, slots=True)
+class EncoderConfig:
+    """Encoder settings.
+
+    Attributes
+    ----------
+    output
+        ``"auto"`` (by autopilot flavour), ``"gps_input"`` or ``"global_position_sensor"``.
+    gps_id
+        GPS_INPUT ``gps_id`` / GLOBAL_POSITION_SENSOR ``id``.
+    min_h_acc_m, min_v_acc_m
+        Floors of the published 1-sigma horizontal / vertical accuracy, m.
+    min_vel_acc_mps
+        Floor of the published speed accuracy, m/s.
+    uere_m
+        Nominal user-equivalent range error used to derive HDOP/VDOP, m.
+    gps_input_yaw
+        Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
+        autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
+        be a deliberate choice.
+    statustext_min_interval_s
+        Least time between two STATUSTEXTs of the same alert code, s.
+    statustext_interval_overrides
+        ``((code, interval_s), ...)`` per-code exceptions.
+    dialect
+        pymavlink v2.0 dialect module used to build and pack messages.
+    """
+
+    output: str = ranged("auto", choices=OUTPUTS)
+    gps_id: int = ranged(0, ge=0, le=255)
+    min_h_acc_m: float = ranged(0.01, gt=0.0)
+    min_v_acc_m: float = ranged(0.01, gt=0.0)
+    min_vel_acc_mps: float = ranged(0.01, gt=0.0)
+    uere_m: float = ranged(1.0, gt=0.0)
+    gps_input_yaw: bool = False
+    statustext_min_interval_s: float = ranged(5.0, ge=0.0)
+    statustext_interval_overrides: tuple[tuple[str, float], ...] = ()
+    dialect: str = "ardupilotmega"
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+        codes = {c.value for c in AlertCode}
+        for code, interval in self.statustext_interval_overrides:
+            if code not in codes:
+                raise ValueError(f"unknown alert code {code!r} in statustext_interval_overrides")
+            if not interval >= 0.0:
+                raise ValueError(f"interval for {code} must be >= 0")
+        load_dialect(self.dialect)
