@@ -25,8 +25,8 @@ class EngineConfig:
     reanchor_distance_m: float = ranged(20_000.0, ge=1000.0, finite=False)
     """Re-anchor the local NED frame when the solution is this far from its anchor."""
     navigator: str = ranged("blend", choices=NAVIGATORS)
-    """Which navigator carries the position: 'blend' (GNSS/INS, S1; with the pass-through
-    taking over while no IMU stream arrives), 'singer' (S2's manoeuvre model, no IMU) or
+    """Which navigator carries the position: 'blend' (GNSS/INS, El-Mowafy 2005; with the pass-through
+    taking over while no IMU stream arrives), 'singer' (Singer's manoeuvre model, no IMU) or
     'passthrough' (GNSS with constant-velocity extrapolation)."""
     imu_timeout_s: float = ranged(0.5, gt=0.0, le=5.0)
     """The blend carries the solution only while an IMU sample is at most this old."""
@@ -35,25 +35,23 @@ class EngineConfig:
     (and is always the integrity monitor's independent solution)."""
     potential_bridge: bool = True
     """Without an IMU stream, carry the solution through GNSS gaps (BRIDGING) with the
-    position-potential filter (S0) instead of the pass-through's constant velocity."""
+    position-potential filter (Grzegorzewski 2005) instead of the pass-through's constant velocity."""
     potential_combine: bool = False
     """With an IMU stream, publish through gaps the INS and potential predictions combined
     by their covariances (their shared last-fix error as cross-covariance) while the two
-    agree (:func:`companion.nav.potential.combine_with_ins`). bench/potential.py part B,
-    RTK-fixed flights: 0.66-0.99 of the better of the two alone, approaches and turning
-    cruises; as a pseudo-measurement in the blend it was worse. But on the bundled
-    cruise_gnss_loss flight (MEMS, a minute of turns) it is worse than the INS alone
-    (mean 3.2 m against 2.9 m): off by default."""
+    agree (:func:`companion.nav.potential.combine_with_ins`). Better than either alone on
+    simulated RTK-fixed approaches and cruises, worse than the INS alone on a MEMS flight
+    with a minute of turns (``python bench/potential.py`` measures both): off by default."""
     inertial_reference: bool = False
     """With the blend, keep free-inertial solutions coasting from staggered anchors
     (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's
     references: they do not contain the receivers' recent fixes, so a slow vertical ramp or
-    a sub-metre dither shows against them even with one receiver (S3's separation set).
-    Worth its cost (about 0.3 ms per fix) with a tactical IMU; a MEMS IMU drifts too fast
-    to catch anything the innovation test misses (bench/integrity.py)."""
+    a sub-metre dither shows against them even with one receiver (the separation set of Kim, Walter and Powell).
+    Worth its cost with a tactical IMU; a MEMS IMU drifts too fast to catch anything the
+    innovation test misses (``python bench/integrity.py`` measures both)."""
     potential_fix_test: bool = False
     """Test each fix of the fused receiver against the potential prediction's ellipsoid
-    (S0) in the integrity monitor. Off by default: the prediction has no acceleration,
+    (Grzegorzewski 2005) in the integrity monitor. Off by default: the prediction has no acceleration,
     so the test trips at manoeuvre onsets (turns, rotation) where the blend's innovation
     test, with the IMU, does not."""
 

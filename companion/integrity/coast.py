@@ -124,8 +124,7 @@ class CoastConfig:
     ``life_s / slots``, so the oldest is always at least ``life_s (1 - 1/slots)`` old
     (25 s by default: older than the monitor's 10 s window). Beyond about 30 s a
     tactical-grade slot's vertical sigma exceeds 15 cm and it no longer sharpens the
-    tests (measured on the simulator's approaches: 6 slots over 30 s caught 5 of 6
-    vertical 4 cm/s ramps before 0.6 m, 6 over 60 s caught 3)."""
+    tests (``python bench/integrity.py`` measures detection for other lives)."""
     history_s: float = ranged(2.0, gt=0.0)
     """Length of the increment history: the oldest fix time a reference can be given at, s."""
     max_imu_gap_s: float = ranged(0.5, gt=0.0)

@@ -431,7 +431,8 @@ _CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
             "gnss_vel_noise_mps": 0.1,
         },
         _no_events,
-        "parked 30 s, taxi legs with turns at 8 m/s, line-up; ATTITUDE yaw off by 1 deg (S4)",
+        "parked 30 s, taxi legs with turns at 8 m/s, line-up; "
+        "ATTITUDE yaw off by 1 deg (Markelov et al.)",
     ),
     "approach": (
         dict(_APPROACH),
@@ -441,12 +442,12 @@ _CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
     "approach_rtk20": (
         dict(_APPROACH),
         _rtk_outage(20.0),
-        "3 deg approach with a 20 s RTK correction outage in the glide (S1)",
+        "3 deg approach with a 20 s RTK correction outage in the glide (El-Mowafy 2005)",
     ),
     "approach_rtk40": (
         dict(_APPROACH),
         _rtk_outage(40.0),
-        "3 deg approach with a 40 s RTK correction outage in the glide (S1)",
+        "3 deg approach with a 40 s RTK correction outage in the glide (El-Mowafy 2005)",
     ),
     "cruise_gnss_loss": (
         {"flight": "cruise", "gnss_mode": "dgps", "cruise_s": 300.0},
@@ -462,18 +463,19 @@ _CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
         },
         _stale,
         "DGPS descent from 400 m; the receiver repeats its last fix for 10 s level, "
-        "15 s on the descent (S0)",
+        "15 s on the descent (Grzegorzewski 2005)",
     ),
     "ramp_fault": (
         {**_APPROACH, "imu_rate_hz": 50.0, "second_receiver": True},
         _ramp,
-        "approach, receiver 0 position ramps down 4 cm/s for 60 s; second receiver clean (S3)",
+        "approach, receiver 0 position ramps down 4 cm/s for 60 s; "
+        "second receiver clean (Kim, Walter and Powell)",
     ),
     "dither_fault": (
         {**_APPROACH, "imu_rate_hz": 50.0, "second_receiver": True},
         _dither,
         "approach, receiver 0 height dithers 1 m (20 s period) for 60 s; "
-        "second receiver clean (S3)",
+        "second receiver clean (Kim, Walter and Powell)",
     ),
     "px4_rotorcraft": (
         {

@@ -14,42 +14,31 @@ OUTPUTS = ("auto", "gps_input", "global_position_sensor")
 
 @dataclass(frozen=True, slots=True)
 class EncoderConfig:
-    """Encoder settings.
-
-    Attributes
-    ----------
-    output
-        ``"auto"`` (by autopilot flavour), ``"gps_input"`` or ``"global_position_sensor"``.
-    gps_id
-        GPS_INPUT ``gps_id`` / GLOBAL_POSITION_SENSOR ``id``.
-    min_h_acc_m, min_v_acc_m
-        Floors of the published 1-sigma horizontal / vertical accuracy, m.
-    min_vel_acc_mps
-        Floor of the published speed accuracy, m/s.
-    uere_m
-        Nominal user-equivalent range error used to derive HDOP/VDOP, m.
-    gps_input_yaw
-        Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
-        autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
-        be a deliberate choice.
-    statustext_min_interval_s
-        Least time between two STATUSTEXTs of the same alert code, s.
-    statustext_interval_overrides
-        ``((code, interval_s), ...)`` per-code exceptions.
-    dialect
-        pymavlink v2.0 dialect module used to build and pack messages.
-    """
+    """Encoder settings."""
 
     output: str = ranged("auto", choices=OUTPUTS)
+    """``"auto"`` (by autopilot flavour), ``"gps_input"`` or
+    ``"global_position_sensor"``."""
     gps_id: int = ranged(0, ge=0, le=255)
+    """GPS_INPUT ``gps_id`` / GLOBAL_POSITION_SENSOR ``id``."""
     min_h_acc_m: float = ranged(0.01, gt=0.0)
+    """Floors of the published 1-sigma horizontal / vertical accuracy, m."""
     min_v_acc_m: float = ranged(0.01, gt=0.0)
+    """Floors of the published 1-sigma horizontal / vertical accuracy, m."""
     min_vel_acc_mps: float = ranged(0.01, gt=0.0)
+    """Floor of the published speed accuracy, m/s."""
     uere_m: float = ranged(1.0, gt=0.0)
+    """Nominal user-equivalent range error used to derive HDOP/VDOP, m."""
     gps_input_yaw: bool = False
+    """Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
+    autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
+    be a deliberate choice."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
+    """Least time between two STATUSTEXTs of the same alert code, s."""
     statustext_interval_overrides: tuple[tuple[str, float], ...] = ()
+    """``((code, interval_s), ...)`` per-code exceptions."""
     dialect: str = "ardupilotmega"
+    """pymavlink v2.0 dialect module used to build and pack messages."""
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -23,9 +23,9 @@ class BlendConfig:
     mode: str = ranged("attitude_aided", choices=("attitude_aided", "strapdown"))
     """``"attitude_aided"`` (autopilot ATTITUDE rotates the specific force) or ``"strapdown"``."""
     adaptive: bool = True
-    """Adaptive R and Q (S1); False gives the non-adaptive baseline."""
+    """Adaptive R and Q (El-Mowafy 2005); False gives the non-adaptive baseline."""
     adaptive_window: int = ranged(25, ge=2, le=1000)
-    """Moving-window length N in GNSS epochs (S1: 20-30)."""
+    """Moving-window length N in GNSS epochs (El-Mowafy 2005: 20-30)."""
     adaptive_min_epochs: int = ranged(10, ge=1)
     """Epochs in the window before the adaptive estimates are used."""
     lever_arm_b_m: tuple[float, float, float] = ranged((0.0, 0.0, 0.0), length=3)

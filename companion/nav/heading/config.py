@@ -19,7 +19,7 @@ TRACK_SOURCES = ("auto", "velocity", "position")
 
 @dataclass(frozen=True, slots=True)
 class HeadingConfig:
-    """Settings of the taxi heading correction (S4).
+    """Settings of the taxi heading correction (Markelov et al.).
 
     Markelov et al., "INS course correction from satellite navigation before
     take-off"; the method is summarised in :mod:`companion.nav.heading` and

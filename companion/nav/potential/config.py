@@ -23,10 +23,10 @@ class PotentialConfig:
     weight_floor: float = ranged(1e-12, gt=0.0, lt=1.0)
     """A source is dropped once ``e^{α(t_i − t_n)}`` falls below this."""
     alpha0_ps: float = ranged(2.84, gt=0.0)
-    """Starting α [1/s] and G [1/s²] (S0's stable-descent values, which
+    """Starting α [1/s] and G [1/s²] (the stable-descent values of Grzegorzewski 2005, which
     keep their meaning with the relative weights at σ ≈ 1 m)."""
     g0_ps2: float = ranged(0.35, gt=0.0)
-    """Starting α [1/s] and G [1/s²] (S0's stable-descent values, which
+    """Starting α [1/s] and G [1/s²] (the stable-descent values of Grzegorzewski 2005, which
     keep their meaning with the relative weights at σ ≈ 1 m)."""
     alpha_bounds_ps: tuple[float, float] = ranged((0.5, 10.0), gt=0.0, length=2)
     """Bounds of the fit [1/s], [1/s²] (searched in log10). G's ceiling
@@ -37,7 +37,7 @@ class PotentialConfig:
     field barely dissipates, the particle is pulled towards the centroid
     of the whole window (seconds behind the aircraft) and 5-20 s
     predictions collapse, while the one-step objective hardly notices
-    (S0: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
+    (Grzegorzewski 2005: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
     g_bounds_ps2: tuple[float, float] = ranged((1e-6, 1e2), gt=0.0, length=2)
     """Bounds of the fit [1/s], [1/s²] (searched in log10). G's ceiling
     keeps ``G·A·Δt² ≲ 1`` with ``A ≈ 2/(1 − e^{−αΔt})`` of 2-40 at 5-10 Hz:
@@ -47,13 +47,12 @@ class PotentialConfig:
     field barely dissipates, the particle is pulled towards the centroid
     of the whole window (seconds behind the aircraft) and 5-20 s
     predictions collapse, while the one-step objective hardly notices
-    (S0: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
+    (Grzegorzewski 2005: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
     refit_interval_s: float = ranged(5.0, gt=0.0)
     """Minimum fix time between two fits [s]: the real-time budget. A warm
-    fit costs ~10-25 ms (``bench/potential.py`` prints it), so 5 s costs
-    2-5 ms per second of flight; 2 s fits the decelerating and
-    flight-path-changing phases a little better (bench part A), 10 s
-    noticeably worse. The engine also forces a fit at the start of a gap."""
+    fit costs tens of milliseconds (``python bench/potential.py`` prints it);
+    shorter intervals fit decelerating and flight-path-changing phases a
+    little better, longer ones noticeably worse. The engine also forces a fit at the start of a gap."""
     min_fit_fixes: int = ranged(6, ge=3)
     """Fewest fixes in the window for a fit."""
     first_fit_span_s: float = ranged(2.0, gt=0.0)
@@ -93,7 +92,7 @@ class PotentialConfig:
     the least-squares slope through the last ``velocity_span_s`` of fixes,
     which also fills components the receiver does not give). Each fit
     keeps the candidate with the smallest objective over the window;
-    ``(1.0,)`` is S0's measured velocity. The filter starts with the largest."""
+    ``(1.0,)`` is the paper's measured velocity. The filter starts with the largest."""
     velocity_fit_orders: tuple[int, ...] = ranged((1, 2), choices=(1, 2), nonempty=True)
     """Candidate orders (1: line, 2: parabola) of the least-squares fit that
     gives ``v_lsq``. A line's slope is the velocity at the middle of the
@@ -103,8 +102,8 @@ class PotentialConfig:
     restarts) with the largest β and order, the least-lagging velocity."""
     fit_horizons_s: tuple[float, ...] = ranged((0.5, 1.0, 2.0, 4.0), gt=0.0)
     """Gap-prediction horizons [s] whose squared errors (from the particle at
-    fixes every ``fit_start_every_s``, field frozen) join S0's one-step sum
-    in the fit objective; empty for S0's objective alone. With the
+    fixes every ``fit_start_every_s``, field frozen) join the paper's one-step sum
+    in the fit objective; empty for the paper's objective alone. With the
     particle's velocity reset at every fix, the one-step sum barely sees
     the field's pull (metres over a gap, millimetres over one fix
     interval): the multi-step terms fit α and G to the use they are put to."""
@@ -121,7 +120,7 @@ class PotentialConfig:
     """At each fix, move the particle's carried position towards the fix by
     the per-axis gain ``K = P/(P + R)`` (``P`` the predicted position
     variance, ``R`` the fix's) (True, the default), or keep the carried
-    position (False, pure S0). Without it, the particle's position is tied
+    position (False, the paper's filter). Without it, the particle's position is tied
     to the fixes only through the field, whose centre (the weighted
     centroid of the recent fixes) trails a moving aircraft by ~1/α of
     motion: any G strong enough to hold the particle drags it towards
@@ -148,7 +147,7 @@ class PotentialConfig:
         "measured", choices=("measured", "carried")
     )
     """Velocity of the particle at a fix: the fix's (derived where absent),
-    or the carried particle's (pure S0 particle)."""
+    or the carried particle's (the paper's particle)."""
     velocity_span_s: float = ranged(1.0, gt=0.0)
     """Span of the least-squares line giving velocity components the fix lacks [s]."""
     prior_vel_sigma_mps: float = ranged(1.0, gt=0.0)
@@ -162,9 +161,9 @@ class PotentialConfig:
     calib_forgetting: float = ranged(0.25, gt=0.0, le=1.0)
     """Factor in (0, 1] by which the binned residual sums of earlier fits decay
     at each fit. A manoeuvre's window (the push-over into a glide: metres
-    at 5 s) outweighs a steady window's (centimetres) by 10⁴ in e²: at
-    0.5 per fit it still ruled the 20-s gap covariance half a minute later
-    (Part B of ``bench/potential.py``); 0.25 leaves it 1/4096 after six fits."""
+    at 5 s) outweighs a steady window's (centimetres) by 10⁴ in e²: 0.25
+    leaves it 1/4096 after six fits, where 0.5 let it rule the gap covariance
+    half a minute later."""
     seed: int = 0
     """Seed of the optimiser (each fit uses ``seed + fit count``)."""
 
