@@ -51,7 +51,6 @@ APPLICATION = frozenset(
         "pipeline",
         "recorder",
         "replay",
-        "report",
         "service",
         "sim",
     }
