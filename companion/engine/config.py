@@ -25,9 +25,9 @@ class EngineConfig:
     reanchor_distance_m: float = ranged(20_000.0, ge=1000.0, finite=False)
     """Re-anchor the local NED frame when the solution is this far from its anchor."""
     navigator: str = ranged("blend", choices=NAVIGATORS)
-    """Which navigator carries the position: 'blend' (GNSS/INS, El-Mowafy 2005; with the pass-through
-    taking over while no IMU stream arrives), 'singer' (Singer's manoeuvre model, no IMU) or
-    'passthrough' (GNSS with constant-velocity extrapolation)."""
+    """Which navigator carries the position: 'blend' (GNSS/INS, El-Mowafy 2005; with the
+    pass-through taking over while no IMU stream arrives), 'singer' (Singer's manoeuvre
+    model, no IMU) or 'passthrough' (GNSS with constant-velocity extrapolation)."""
     imu_timeout_s: float = ranged(0.5, gt=0.0, le=5.0)
     """The blend carries the solution only while an IMU sample is at most this old."""
     primary_receiver: int = ranged(0, choices=(0, 1))
@@ -35,7 +35,8 @@ class EngineConfig:
     (and is always the integrity monitor's independent solution)."""
     potential_bridge: bool = True
     """Without an IMU stream, carry the solution through GNSS gaps (BRIDGING) with the
-    position-potential filter (Grzegorzewski 2005) instead of the pass-through's constant velocity."""
+    position-potential filter (Grzegorzewski 2005) instead of the pass-through's constant
+    velocity."""
     potential_combine: bool = False
     """With an IMU stream, publish through gaps the INS and potential predictions combined
     by their covariances (their shared last-fix error as cross-covariance) while the two
@@ -46,14 +47,15 @@ class EngineConfig:
     """With the blend, keep free-inertial solutions coasting from staggered anchors
     (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's
     references: they do not contain the receivers' recent fixes, so a slow vertical ramp or
-    a sub-metre dither shows against them even with one receiver (the separation set of Kim, Walter and Powell).
-    Worth its cost with a tactical IMU; a MEMS IMU drifts too fast to catch anything the
-    innovation test misses (``python bench/integrity.py`` measures both)."""
+    a sub-metre dither shows against them even with one receiver (the separation set of
+    Kim, Walter and Powell). Worth its cost with a tactical IMU; a MEMS IMU drifts too fast
+    to catch anything the innovation test misses (``python bench/integrity.py`` measures
+    both)."""
     potential_fix_test: bool = False
     """Test each fix of the fused receiver against the potential prediction's ellipsoid
-    (Grzegorzewski 2005) in the integrity monitor. Off by default: the prediction has no acceleration,
-    so the test trips at manoeuvre onsets (turns, rotation) where the blend's innovation
-    test, with the IMU, does not."""
+    (Grzegorzewski 2005) in the integrity monitor. Off by default: the prediction has no
+    acceleration, so the test trips at manoeuvre onsets (turns, rotation) where the blend's
+    innovation test, with the IMU, does not."""
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -25,9 +25,11 @@ class IntegrityConfig:
     of the separation snapshot test. At 10 fixes/s this bounds the false alerts at
     3.6e-3 per hour per test even if every epoch were independent."""
     slope_false_alarm_prob: float = ranged(1e-7, gt=0.0, lt=1.0)
-    """Per-test false-alarm probability of the separation slope test (Kim, Walter and Powell; ramps)."""
+    """Per-test false-alarm probability of the separation slope test (ramps; Kim, Walter
+    and Powell)."""
     residual_false_alarm_prob: float = ranged(1e-7, gt=0.0, lt=1.0)
-    """Per-test false-alarm probability of the separation residual test (Kim, Walter and Powell; dithering)."""
+    """Per-test false-alarm probability of the separation residual test (dithering; Kim,
+    Walter and Powell)."""
     integrity_risk_horizontal: float = ranged(5e-9, gt=0.0, lt=1.0)
     """Allocated risk of the HPL; 5e-9 gives DO-229's K_H = 6.18."""
     integrity_risk_vertical: float = ranged(1e-7, gt=0.0, lt=1.0)

@@ -111,17 +111,7 @@ class IntegrityMonitor:
         predicted: NavState | None = None,
         references: Mapping[str, NavState] | None = None,
     ) -> list[Output]:
-        """Test one fix; returns FAULT alerts (:meth:`FaultDetector.on_fix`).
-
-        Parameters
-        ----------
-        fix : the receiver's fix (for the receiver id and the alert text).
-        meas : the same fix in the local NED frame.
-        update : what the navigator did with it (its innovation chi-square), or None
-            when it was not offered (e.g. the receiver is excluded).
-        predicted : the position-potential filter's prediction at the fix time, or None.
-        references : independent solutions at (about) the fix time, by name.
-        """
+        """Test one fix; returns FAULT alerts (parameters: :meth:`FaultDetector.on_fix`)."""
         return self.fde.on_fix(fix, meas, update, predicted, references)
 
     # ------------------------------------------------------------------ protection

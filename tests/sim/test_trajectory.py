@@ -7,27 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from companion.nav.rotations import euler_to_quat, quat_to_euler
+from companion.nav.rotations import euler_to_quat, quat_mul, quat_to_euler
 from companion.sim import make_scenario, simulate
 from companion.sim.flight import _make_path
 from companion.sim.scenarios import build_script
 from companion.sim.trajectory import ScriptBuilder, gravity_down_mps2
 
 
-def _qmul(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float, float]:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
 def _rot(q: tuple[float, ...], v: tuple[float, ...]) -> tuple[float, float, float]:
     w, x, y, z = q
-    r = _qmul(_qmul(q, (0.0, *v)), (w, -x, -y, -z))
+    r = quat_mul(quat_mul(q, (0.0, *v)), (w, -x, -y, -z))
     return r[1], r[2], r[3]
 
 
@@ -61,7 +50,7 @@ def _strapdown_rk4(path, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
         return g_cache[key]
 
     def deriv(qs, vs, ps, w, f):
-        dq = _qmul(qs, (0.0, *w))
+        dq = quat_mul(qs, (0.0, *w))
         dq = tuple(0.5 * c for c in dq)
         a = _rot(qs, f)
         return dq, (a[0], a[1], a[2] + grav(ps)), vs

@@ -52,7 +52,8 @@ class PotentialConfig:
     """Minimum fix time between two fits [s]: the real-time budget. A warm
     fit costs tens of milliseconds (``python bench/potential.py`` prints it);
     shorter intervals fit decelerating and flight-path-changing phases a
-    little better, longer ones noticeably worse. The engine also forces a fit at the start of a gap."""
+    little better, longer ones noticeably worse. The engine also forces a fit at the
+    start of a gap."""
     min_fit_fixes: int = ranged(6, ge=3)
     """Fewest fixes in the window for a fit."""
     first_fit_span_s: float = ranged(2.0, gt=0.0)
