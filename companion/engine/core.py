@@ -45,10 +45,10 @@ from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
-from companion.nav.frames import LocalFrame
+from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
 from companion.nav.heading import HeadingConfig, HeadingCorrector
-from companion.nav.navigator import NavState, rotation_between_frames
+from companion.nav.navigator import NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
 from companion.types import (

@@ -119,3 +119,11 @@ class LocalFrame:
     def distance_from_anchor_m(self, pos_ned_m: FloatArray) -> float:
         """Horizontal distance of a local position from the anchor, m."""
         return float(math.hypot(pos_ned_m[0], pos_ned_m[1]))
+
+
+def rotation_between_frames(old: LocalFrame, new: LocalFrame) -> FloatArray:
+    """Rotation taking NED vectors of ``old`` into NED vectors of ``new``, shape (3, 3).
+
+    Computed from the two frames' ECEF-to-NED rotations (C_new_e @ C_e_old).
+    """
+    return new.mat_ne() @ old.mat_ne().T

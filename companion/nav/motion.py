@@ -36,10 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.nav.frames import LocalFrame
+from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import FALLBACK_STD_M, UNKNOWN_STD_M
 from companion.nav.kalman import chi2_gate, joseph_update, predict_covariance, van_loan
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 

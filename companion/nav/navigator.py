@@ -113,11 +113,3 @@ class Navigator(Protocol):
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express the state in a new local frame (re-anchoring on long legs)."""
         ...
-
-
-def rotation_between_frames(old: LocalFrame, new: LocalFrame) -> FloatArray:
-    """Rotation taking NED vectors of ``old`` into NED vectors of ``new``, shape (3, 3).
-
-    Computed from the two frames' ECEF-to-NED rotations (C_new_e @ C_e_old).
-    """
-    return new.mat_ne() @ old.mat_ne().T

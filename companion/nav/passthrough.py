@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from companion.nav.frames import LocalFrame
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.frames import LocalFrame, rotation_between_frames
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 

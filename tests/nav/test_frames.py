@@ -8,8 +8,12 @@ import numpy as np
 import pymap3d
 import pytest
 
-from companion.nav.frames import LocalFrame, ecef_to_geodetic, geodetic_to_ecef_m
-from companion.nav.navigator import rotation_between_frames
+from companion.nav.frames import (
+    LocalFrame,
+    ecef_to_geodetic,
+    geodetic_to_ecef_m,
+    rotation_between_frames,
+)
 
 
 def test_local_frame_matches_pymap3d_everywhere():

@@ -34,8 +34,8 @@ from companion.integrity.fde.attribution import Attribution
 from companion.integrity.fde.fix_tests import FixTests, valid_measurement
 from companion.integrity.fde.pairs import REF_PREFIX, PairSeparations
 from companion.integrity.fde.receivers import ReceiverState, is_excluded
-from companion.nav.frames import LocalFrame
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.frames import LocalFrame, rotation_between_frames
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.types import Alert, AlertCode, GnssFix, Output, Severity
 
 log = logging.getLogger(__name__)

@@ -30,9 +30,9 @@ from companion.nav.blend.history import (
 )
 from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.receiver import ReceiverError
-from companion.nav.frames import LocalFrame
+from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.kalman import chi2_gate, joseph_update_diag_r, predict_covariance
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState, rotation_between_frames
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.nav.rotations import (
     Quat,
     euler_to_quat_values,
