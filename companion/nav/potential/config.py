@@ -23,31 +23,21 @@ class PotentialConfig:
     weight_floor: float = ranged(1e-12, gt=0.0, lt=1.0)
     """A source is dropped once ``e^{α(t_i − t_n)}`` falls below this."""
     alpha0_ps: float = ranged(2.84, gt=0.0)
-    """Starting α [1/s] and G [1/s²] (the stable-descent values of Grzegorzewski 2005, which
-    keep their meaning with the relative weights at σ ≈ 1 m)."""
+    """Starting α [1/s]: the stable-descent value of Grzegorzewski 2005, which keeps its
+    meaning with the relative weights at σ ≈ 1 m."""
     g0_ps2: float = ranged(0.35, gt=0.0)
-    """Starting α [1/s] and G [1/s²] (the stable-descent values of Grzegorzewski 2005, which
-    keep their meaning with the relative weights at σ ≈ 1 m)."""
+    """Starting G [1/s²]: the paper's stable-descent value, as for ``alpha0_ps``."""
     alpha_bounds_ps: tuple[float, float] = ranged((0.5, 10.0), gt=0.0, length=2)
-    """Bounds of the fit [1/s], [1/s²] (searched in log10). G's ceiling
-    keeps ``G·A·Δt² ≲ 1`` with ``A ≈ 2/(1 − e^{−αΔt})`` of 2-40 at 5-10 Hz:
-    a stiffer field swings the particle within one fix interval (a parked
-    window's fit otherwise runs to any ceiling). The closed form
-    is sound for any α ≥ 0, but the fit's α floor is 0.5 1/s: below it the
-    field barely dissipates, the particle is pulled towards the centroid
-    of the whole window (seconds behind the aircraft) and 5-20 s
-    predictions collapse, while the one-step objective hardly notices
+    """Bounds of the fit of α [1/s] (searched in log10). The closed form is sound
+    for any α ≥ 0, but below 0.5 1/s the field barely dissipates, the particle is
+    pulled towards the centroid of the whole window (seconds behind the aircraft)
+    and 5-20 s predictions collapse, while the one-step objective hardly notices
     (Grzegorzewski 2005: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
     g_bounds_ps2: tuple[float, float] = ranged((1e-6, 1e2), gt=0.0, length=2)
-    """Bounds of the fit [1/s], [1/s²] (searched in log10). G's ceiling
-    keeps ``G·A·Δt² ≲ 1`` with ``A ≈ 2/(1 − e^{−αΔt})`` of 2-40 at 5-10 Hz:
-    a stiffer field swings the particle within one fix interval (a parked
-    window's fit otherwise runs to any ceiling). The closed form
-    is sound for any α ≥ 0, but the fit's α floor is 0.5 1/s: below it the
-    field barely dissipates, the particle is pulled towards the centroid
-    of the whole window (seconds behind the aircraft) and 5-20 s
-    predictions collapse, while the one-step objective hardly notices
-    (Grzegorzewski 2005: α = 2.7-3.8 fitted, α = 0.2 "diverged badly")."""
+    """Bounds of the fit of G [1/s²] (searched in log10). The ceiling keeps
+    ``G·A·Δt² ≲ 1`` with ``A ≈ 2/(1 − e^{−αΔt})`` of 2-40 at 5-10 Hz: a stiffer
+    field swings the particle within one fix interval (a parked window's fit
+    otherwise runs to any ceiling)."""
     refit_interval_s: float = ranged(5.0, gt=0.0)
     """Minimum fix time between two fits [s]: the real-time budget. A warm
     fit costs tens of milliseconds (``python bench/potential.py`` prints it);
