@@ -270,6 +270,13 @@ def test_a_signed_ground_station_confirms_the_heading_correction(signed_run):
     assert acks[0].command == MAV_CMD_USER_1 and acks[0].result == 0
     assert acks[0].target_system == 255 and acks[0].target_component == 190
     assert len(signed_run["applied_texts"]) == 1
+    gcs = signed_run["gcs"]
+    print(
+        f"applied {math.degrees(applied):.3f} deg (injected {INJECTED_DEG} deg); "
+        f"refused {signed_run['rejections']}; signed frames accepted "
+        f"{signed_run['accepted_signed']}; ours verified by pymavlink "
+        f"{gcs.mav.signing.goodsig_count}, bad {gcs.mav.signing.badsig_count}"
+    )
 
 
 def test_unsigned_and_wrong_key_confirmations_are_refused_and_counted(signed_run):
