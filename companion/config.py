@@ -30,6 +30,7 @@ from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
+from companion.mavlink.signing import SigningConfig
 from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
@@ -114,6 +115,8 @@ class Config:
     figures; sitl_fixtures/tactical.toml has the tactical grade's."""
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    signing: SigningConfig = field(default_factory=SigningConfig)
+    """MAVLink 2 message signing per link ([signing.autopilot], [signing.gcs])."""
 
 
 def load_config(path: Path | None) -> Config:

@@ -17,6 +17,13 @@ recorder flushed, exit status 0.
 
 Everything goes to every link: the autopilot consumes GPS_INPUT and routes the
 rest to its own ground stations; a direct ground-station link sees all of it.
+
+MAVLink 2 signing (``[signing.autopilot]``, ``[signing.gcs]``) is applied per link at
+this edge (:mod:`companion.mavlink.signing`): frames are signed as they are sent on a
+signing link (the flight recorder keeps them as the pipeline packed them), and a
+signing link's parser drops the frames its verifier refuses. The signing timestamp is
+stored in ``signing.json`` beside ``link.state_file`` every ``SIGNING_SAVE_PERIOD_S``
+and on stop, and starts from the larger of the stored one and the wall clock.
 """
 
 from __future__ import annotations
@@ -34,12 +41,18 @@ from pathlib import Path
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.framing import FrameParser
-from companion.mavlink.link import Link, LinkError, open_link
+from companion.mavlink.link import Link, LinkError, UdpLink, open_link
+from companion.mavlink.signing import LinkSigning, load_key, timestamp_at
 from companion.notify import SystemdNotifier
 from companion.pipeline import Pipeline
 from companion.recorder import Recorder
 
 log = logging.getLogger(__name__)
+
+SIGNING_STATE_FILE = "signing.json"
+"""The signing timestamp's file, in the folder of ``link.state_file``."""
+SIGNING_SAVE_PERIOD_S = 10.0
+"""How often the signing timestamp is stored (MAVLink asks for at least once a minute)."""
 
 
 class Service:
@@ -56,6 +69,12 @@ class Service:
         self.links_opened = 0
         self._saved_changes = 0
         self._load_state()
+        self._signing_saved_at_s = -math.inf
+        """When the signing timestamp was last stored (wall clock, s)."""
+        self._signing_saved = -1
+        """The signing timestamp last stored."""
+        self.signing: dict[str, LinkSigning] = self._setup_signing()
+        """Signing per link name ("autopilot", "gcs"), for the links that sign."""
 
     def stop(self) -> None:
         """Ask the service to stop (signal handlers call this)."""
@@ -100,12 +119,27 @@ class Service:
         if self.recorder is not None:
             self.recorder.close()
         self._save_state()
+        self._save_signing(time.time())
+        for name, signing in self.signing.items():
+            verifier = signing.verifier
+            log.info(
+                "%s link signing: %d frames signed, %d signed frames accepted, refused %s",
+                name,
+                signing.signer.signed,
+                verifier.accepted_signed,
+                dict(verifier.rejections) or "none",
+            )
         log.info("companion stopped")
         return 0
 
     async def _reader(self, name: str, url: str) -> None:
         # the pipeline's decoder and the recorder (get_msgbuf) are the only consumers
-        parser = FrameParser(self.config.encoder.dialect, light_ids=LIGHT_MESSAGE_IDS)
+        signing = self.signing.get(name)
+        parser = FrameParser(
+            self.config.encoder.dialect,
+            light_ids=LIGHT_MESSAGE_IDS,
+            frame_check=signing.accept if signing is not None else None,
+        )
         while not self._stop.is_set():
             try:
                 link = await open_link(url, self.config.link.baud)
@@ -122,10 +156,18 @@ class Service:
             self._links[name] = link
             self.links_opened += 1
             log.info("%s link open: %s", name, url)
+            # a signing udpin link replies only to senders of frames it accepted
+            adopt = None
+            if signing is not None and isinstance(link, UdpLink) and link.listen:
+                link.reply_to_any_sender = False
+                adopt = link.adopt_sender
             try:
                 while True:
                     data = await link.recv()
+                    good_before = parser.good_frames
                     await self._on_bytes(parser, data)
+                    if adopt is not None and parser.good_frames > good_before:
+                        adopt()
             except LinkError as exc:
                 log.warning("%s link %s dropped: %s", name, url, exc)
             finally:
@@ -162,6 +204,70 @@ class Service:
         except OSError as exc:
             log.error("cannot save state to %s: %s", path, exc)
 
+    def _signing_path(self) -> Path | None:
+        state_file = self.config.link.state_file
+        return Path(state_file).with_name(SIGNING_STATE_FILE) if state_file else None
+
+    def _setup_signing(self) -> dict[str, LinkSigning]:
+        """Keys read and timestamps started for the links that sign (``ValueError`` naming
+        the block when a key cannot be read)."""
+        cfg = self.config.signing
+        links = (("autopilot", cfg.autopilot), ("gcs", cfg.gcs))
+        wanted = {name: c for name, c in links if c.enabled}
+        if not wanted:
+            return {}
+        start = max(self._load_signing_timestamp(), timestamp_at(time.time()))
+        out: dict[str, LinkSigning] = {}
+        for name, link_cfg in wanted.items():
+            try:
+                key = load_key(link_cfg)
+            except ValueError as exc:
+                raise ValueError(f"[signing.{name}] {exc}") from None
+            out[name] = LinkSigning(link_cfg, key, start, name)
+            log.info(
+                "%s link: MAVLink 2 signing, %s, link id %d", name, link_cfg.mode, link_cfg.link_id
+            )
+        if self._signing_path() is None:
+            log.warning("no link.state_file: the signing timestamp is not kept across restarts")
+        return out
+
+    def _load_signing_timestamp(self) -> int:
+        """The stored signing timestamp (0 when none or unreadable)."""
+        path = self._signing_path()
+        if path is None or not path.exists():
+            return 0
+        try:
+            value = json.loads(path.read_text())["timestamp_10us"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            log.warning("signing timestamp %s unreadable (%s): from the wall clock", path, exc)
+            return 0
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            log.warning("signing timestamp %s is not a count: from the wall clock", path)
+            return 0
+        return value
+
+    def _save_signing(self, now_s: float) -> None:
+        """Store the largest signing timestamp of the links, when it moved (atomically)."""
+        path = self._signing_path()
+        if not self.signing or path is None:
+            return
+        self._signing_saved_at_s = now_s
+        timestamp = max(s.timestamp for s in self.signing.values())
+        if timestamp == self._signing_saved:
+            return
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(tmp, "w") as fh:
+                json.dump({"timestamp_10us": timestamp}, fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except OSError as exc:
+            log.error("cannot save the signing timestamp to %s: %s", path, exc)
+            return
+        self._signing_saved = timestamp
+
     async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
@@ -178,11 +284,13 @@ class Service:
                 self._save_state()
 
     async def _send(self, frames: list[bytes], t_s: float) -> None:
+        now = timestamp_at(t_s) if self.signing else 0
         for frame in frames:
             if self.recorder is not None:
                 self.recorder.record(t_s, frame)
-            for link in list(self._links.values()):
-                await link.send(frame)
+            for name, link in list(self._links.items()):
+                signing = self.signing.get(name)
+                await link.send(frame if signing is None else signing.sign(frame, now))
 
     async def _timer(self) -> None:
         """Send the pipeline's periodic output when due and feed the watchdog.
@@ -199,6 +307,8 @@ class Service:
             frames = self.pipeline.on_timer(now_s)
             if frames:
                 await self._send(frames, now_s)
+            if now_s - self._signing_saved_at_s >= SIGNING_SAVE_PERIOD_S:
+                self._save_signing(now_s)
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:

@@ -9,6 +9,7 @@
 :mod:`.encode`    typed outputs -> messages -> frames
 :mod:`.readback`  our own published messages -> typed values (evaluate, console)
 :mod:`.streams`   stream requests to the autopilot and the received rates
+:mod:`.signing`   MAVLink 2 signing of a link: our frames signed, the peer's checked
 :mod:`.ids`       message ids and enum values; :mod:`.units` the field scalings;
                   :mod:`.dialect` the pymavlink dialect module
 ================  ==============================================================

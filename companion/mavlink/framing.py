@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import logging
 import re
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from typing import Any
 
 from companion.mavlink.dialect import load_dialect
@@ -140,6 +140,11 @@ class FrameParser:
         Message ids returned as :class:`~companion.mavlink.messages.LightMessage`
         rather than pymavlink objects, for consumers known to read only what it has
         (see :data:`companion.mavlink.decode.LIGHT_MESSAGE_IDS`). Default: none.
+    frame_check
+        Optional: called with the bytes of every frame that decoded (CRC checked), it
+        says whether to pass the message on; a frame it refuses is dropped (not bad
+        bytes: it counts it itself). The service's signature check
+        (:meth:`companion.mavlink.signing.Verifier.accept`) is one.
 
     Attributes
     ----------
@@ -149,6 +154,8 @@ class FrameParser:
         Bytes in those regions.
     good_frames : int
         Messages returned.
+    refused_frames : int
+        Frames ``frame_check`` refused.
     """
 
     __slots__ = (
@@ -158,12 +165,19 @@ class FrameParser:
         "_fast",
         "_light",
         "_in_bad",
+        "_check",
+        "refused_frames",
         "bad_frames",
         "bad_bytes",
         "good_frames",
     )
 
-    def __init__(self, dialect: str = "ardupilotmega", light_ids: Collection[int] = ()) -> None:
+    def __init__(
+        self,
+        dialect: str = "ardupilotmega",
+        light_ids: Collection[int] = (),
+        frame_check: Callable[[bytearray], bool] | None = None,
+    ) -> None:
         mod = load_dialect(dialect)
         self._mav = mod.MAVLink(None)
         self._map: dict[int, Any] = mod.mavlink_map
@@ -174,6 +188,8 @@ class FrameParser:
         self.bad_frames = 0
         self.bad_bytes = 0
         self.good_frames = 0
+        self._check = frame_check
+        self.refused_frames = 0
 
     def _mark_bad(self, nbytes: int) -> None:
         if not self._in_bad:
@@ -208,6 +224,7 @@ class FrameParser:
         byte later.
         """
         buf = self._buf
+        check = self._check
         out: list[Any] = []
         pos = 0
         n = len(buf)
@@ -220,7 +237,10 @@ class FrameParser:
                 continue
             status, msg, length = try_frame(self._mav, self._map, buf, pos, self._fast, self._light)
             if status == FRAME_OK:
-                out.append(msg)
+                if check is None or check(buf[pos : pos + length]):
+                    out.append(msg)
+                else:
+                    self.refused_frames += 1
                 self._in_bad = False
                 pos += length
             elif status == FRAME_BAD or end_of_stream:

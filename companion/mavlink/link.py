@@ -8,7 +8,9 @@ URLs
     ``loop.add_reader``). When the device disappears, :meth:`Link.recv` raises
     :class:`LinkError`.
 ``udpin:0.0.0.0:14550`` (alias ``udp:``)
-    listen; sends go to the last sender (dropped, counted, before anyone spoke).
+    listen; sends go to the last sender (dropped, counted, before anyone spoke);
+    with ``reply_to_any_sender`` off, only to a sender the caller adopts (the
+    service adopts the sender of frames a signing link accepted).
 ``udpout:127.0.0.1:14550``
     send to that address; replies are received on the same socket.
 ``tcp:127.0.0.1:5760``
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import abc
 import asyncio
+import collections
 import contextlib
 import logging
 import os
@@ -254,11 +257,24 @@ class _DatagramQueue(asyncio.DatagramProtocol):
 
 
 class UdpLink(Link):
-    """``udpin`` (listen, reply to the last sender) or ``udpout`` (send to a fixed peer)."""
+    """``udpin`` (listen, reply to the last sender) or ``udpout`` (send to a fixed peer).
+
+    Attributes
+    ----------
+    reply_to_any_sender : bool
+        ``udpin``: every datagram makes its sender the peer (the default). Off, the peer
+        changes only by :meth:`adopt_sender`, so that a stranger's datagrams cannot
+        divert what is sent.
+    last_sender : Any
+        ``udpin``: the sender of the chunk :meth:`recv` returned last.
+    """
 
     def __init__(self, url: str, listen: bool, host: str, port: int) -> None:
         super().__init__(url)
         self.listen = listen
+        self.reply_to_any_sender = True
+        self.last_sender: Any = None
+        self._senders: collections.deque[Any] = collections.deque()
         self._addr = (host, port)
         self._peer: Any = None if listen else (host, port)
         self._queue: asyncio.Queue[bytes | None] = asyncio.Queue()
@@ -288,11 +304,21 @@ class UdpLink(Link):
 
     def _on_datagram(self, data: bytes, addr: Any) -> None:
         if self.listen:
-            self._peer = addr
+            if self.reply_to_any_sender:
+                self._peer = addr
+            self._senders.append(addr)
         self._queue.put_nowait(data)
 
     async def recv(self) -> bytes:
-        return await self._recv_queued(self._queue)
+        data = await self._recv_queued(self._queue)
+        if self.listen and self._senders:
+            self.last_sender = self._senders.popleft()
+        return data
+
+    def adopt_sender(self) -> None:
+        """``udpin``: send to the sender of the chunk :meth:`recv` returned last."""
+        if self.listen and self.last_sender is not None:
+            self._peer = self.last_sender
 
     async def send(self, data: bytes) -> None:
         if self._transport is None or self._closed:
