@@ -6,11 +6,17 @@ Tasks:
   bytes -> :class:`~companion.mavlink.framing.FrameParser` -> pipeline -> frames
   sent to every open link and to the flight recorder. A link that drops is
   re-opened every ``reconnect_s`` until it comes back (a serial adapter
-  unplugged and plugged in again, a TCP peer restarting).
-* the timer: sleeps until the pipeline's next due time and sends its periodic
-  output (our HEARTBEAT at ``heartbeat_rate_hz``); the systemd watchdog is fed
-  from the same loop, at least twice per watchdog timeout, only while every
-  reader task is alive.
+  unplugged and plugged in again, a TCP peer restarting); the failed opens are
+  logged with backoff (the 1st, 2nd, 4th, 8th ... and then every 64th, or when the
+  reason changes). A malformed URL is no such failure: :meth:`Service.run` raises
+  :class:`~companion.mavlink.link.LinkUrlError` before starting anything. The
+  autopilot link's reader counts what it delivers (bytes, frames, bad frames) and
+  its autopilot HEARTBEATs in a :class:`~companion.mavlink.watch.HeartbeatWatch`.
+* the timer: sleeps until the pipeline's or the watch's next due time, sends the
+  pipeline's periodic output (our HEARTBEAT at ``heartbeat_rate_hz``) and logs the
+  watch's warning (no autopilot HEARTBEAT for ``no_autopilot_warn_s``, then every
+  ``no_autopilot_repeat_s``); the systemd watchdog is fed from the same loop, at
+  least twice per watchdog timeout, only while every reader task is alive.
 
 SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
 recorder flushed, exit status 0.
@@ -34,12 +40,22 @@ from pathlib import Path
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.framing import FrameParser
-from companion.mavlink.link import Link, LinkError, open_link
+from companion.mavlink.link import Link, LinkError, open_link, parse_url
+from companion.mavlink.watch import HeartbeatWatch
 from companion.notify import SystemdNotifier
 from companion.pipeline import Pipeline
 from companion.recorder import Recorder
 
 log = logging.getLogger(__name__)
+
+RETRY_LOG_EVERY_MAX = 64
+"""Failed opens of a link between two of its warnings, at most (once a minute or so)."""
+
+
+def _log_retry(failures: int) -> bool:
+    """Whether the ``failures``-th failed open in a row is logged: 1, 2, 4, ... 64, then
+    every 64th."""
+    return failures & (failures - 1) == 0 or failures % RETRY_LOG_EVERY_MAX == 0
 
 
 class Service:
@@ -55,6 +71,13 @@ class Service:
         self.recorder: Recorder | None = None
         self.links_opened = 0
         self._saved_changes = 0
+        link_cfg = config.link
+        self.watch = HeartbeatWatch(
+            f"master {link_cfg.master}",
+            link_cfg.no_autopilot_warn_s,
+            link_cfg.no_autopilot_repeat_s,
+        )
+        """The autopilot link's HEARTBEAT watch (docs/mavlink.md, link health)."""
         self._load_state()
 
     def stop(self) -> None:
@@ -68,14 +91,16 @@ class Service:
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, self.stop)
         link_cfg = self.config.link
+        urls = {"autopilot": link_cfg.master}
+        if link_cfg.gcs:
+            urls["gcs"] = link_cfg.gcs
+        for url in urls.values():
+            parse_url(url, link_cfg.baud)  # malformed: LinkUrlError, fatal (never retried)
         if link_cfg.record_dir:
             try:
                 self.recorder = Recorder(Path(link_cfg.record_dir), time.time())
             except OSError as exc:
                 log.error("flight recorder disabled: cannot write %s: %s", link_cfg.record_dir, exc)
-        urls = {"autopilot": link_cfg.master}
-        if link_cfg.gcs:
-            urls["gcs"] = link_cfg.gcs
         self._readers = [
             asyncio.create_task(self._reader(name, url), name=f"reader-{name}")
             for name, url in urls.items()
@@ -106,26 +131,38 @@ class Service:
     async def _reader(self, name: str, url: str) -> None:
         # the pipeline's decoder and the recorder (get_msgbuf) are the only consumers
         parser = FrameParser(self.config.encoder.dialect, light_ids=LIGHT_MESSAGE_IDS)
+        watch = self.watch if name == "autopilot" else None
+        failures = 0
+        last_reason = ""
         while not self._stop.is_set():
             try:
                 link = await open_link(url, self.config.link.baud)
             except LinkError as exc:
-                log.warning(
-                    "%s link %s: %s; retrying in %.1f s",
-                    name,
-                    url,
-                    exc,
-                    self.config.link.reconnect_s,
-                )
+                failures += 1
+                if _log_retry(failures) or str(exc) != last_reason:
+                    log.warning(
+                        "%s link %s: %s; retrying every %.1f s (%d failed)",
+                        name,
+                        url,
+                        exc,
+                        self.config.link.reconnect_s,
+                        failures,
+                    )
+                last_reason = str(exc)
                 await asyncio.sleep(self.config.link.reconnect_s)
                 continue
             self._links[name] = link
             self.links_opened += 1
-            log.info("%s link open: %s", name, url)
+            log.info(
+                "%s link open: %s%s", name, url, f" after {failures} failed" if failures else ""
+            )
+            failures, last_reason = 0, ""
+            if watch is not None:
+                watch.start(time.time())
             try:
                 while True:
                     data = await link.recv()
-                    await self._on_bytes(parser, data)
+                    await self._on_bytes(parser, data, watch)
             except LinkError as exc:
                 log.warning("%s link %s dropped: %s", name, url, exc)
             finally:
@@ -162,15 +199,31 @@ class Service:
         except OSError as exc:
             log.error("cannot save state to %s: %s", path, exc)
 
-    async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
+    async def _on_bytes(
+        self, parser: FrameParser, data: bytes, watch: HeartbeatWatch | None = None
+    ) -> None:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
+        bad_bytes_before = parser.bad_bytes
         messages = parser.feed(data)
         self.pipeline.bad_frames(parser.bad_frames - bad_before)
+        if watch is not None:
+            watch.received(
+                len(data),
+                len(messages),
+                parser.bad_frames - bad_before,
+                parser.bad_bytes - bad_bytes_before,
+            )
+        decoder = self.pipeline.decoder
         for msg in messages:
             if self.recorder is not None:
                 self.recorder.record(t_rx_s, bytes(msg.get_msgbuf()))
+            beats = decoder.autopilot_heartbeats
             frames = self.pipeline.on_message(msg, t_rx_s)
+            if watch is not None and decoder.autopilot_heartbeats != beats:
+                line = watch.heartbeat(t_rx_s)
+                if line:
+                    log.info("%s", line)
             if frames:
                 await self._send(frames, t_rx_s)
             if self.pipeline.engine.state_changes != self._saved_changes:
@@ -199,11 +252,15 @@ class Service:
             frames = self.pipeline.on_timer(now_s)
             if frames:
                 await self._send(frames, now_s)
+            warning = self.watch.check(now_s)
+            if warning:
+                log.warning("%s", warning)
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:
                 log.error("a link reader has died: not feeding the watchdog")
-            sleep_s = min(self.pipeline.next_due_s() - time.time(), max_sleep_s)
+            due_s = min(self.pipeline.next_due_s(), self.watch.next_due_s())
+            sleep_s = min(due_s - time.time(), max_sleep_s)
             await asyncio.sleep(max(sleep_s, 0.0))
 
 
