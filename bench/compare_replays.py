@@ -22,6 +22,10 @@ resolution MAVLink gives it:
   in their last printed digit (counted).
 
 Anything else is a failure. Prints a table; exits 1 on any failure.
+
+``--new-text PREFIX`` (repeatable) declares an intended new alert: STATUSTEXT records
+of NEW whose text starts with PREFIX are listed (time, text) and left out before the
+comparison, so that what remains must agree with REF as above.
 """
 
 from __future__ import annotations
@@ -116,13 +120,28 @@ def _compare_values(a: Any, b: Any, stats: Counter[str]) -> bool:
     return bool(a == b)
 
 
-def compare_file(ref: Path, new: Path) -> tuple[str, Counter[str], list[str]]:
-    """Verdict (``identical``, ``agrees`` or ``DIFFERS``), counts and the first problems."""
+def _is_new_text(msg: Any, prefixes: tuple[str, ...]) -> bool:
+    """A STATUSTEXT whose text starts with one of ``prefixes`` (an intended new alert)."""
+    return bool(prefixes) and msg.get_type() == "STATUSTEXT" and msg.text.startswith(prefixes)
+
+
+def compare_file(
+    ref: Path, new: Path, new_texts: tuple[str, ...] = ()
+) -> tuple[str, Counter[str], list[str]]:
+    """Verdict (``identical``, ``agrees`` or ``DIFFERS``), counts and the first problems;
+    STATUSTEXT records of ``new`` starting with one of ``new_texts`` are left out (listed
+    among the problems' lines with a ``+`` and counted as ``new_texts``)."""
     if ref.read_bytes() == new.read_bytes():
         return "identical", Counter(), []
     stats: Counter[str] = Counter()
     problems: list[str] = []
+    declared: list[str] = []
     a_recs, b_recs = _records(ref), _records(new)
+    if new_texts:
+        added = [(t, m) for t, m in b_recs if _is_new_text(m, new_texts)]
+        b_recs = [(t, m) for t, m in b_recs if not _is_new_text(m, new_texts)]
+        stats["new_texts"] = len(added)
+        declared = [f"+ STATUSTEXT@{t:.6f} {m.text!r} (declared new)" for t, m in added]
     if len(a_recs) != len(b_recs):
         problems.append(f"message count {len(a_recs)} vs {len(b_recs)}")
     for i, ((ta, ma), (tb, mb)) in enumerate(zip(a_recs, b_recs, strict=False)):
@@ -142,13 +161,20 @@ def compare_file(ref: Path, new: Path) -> tuple[str, Counter[str], list[str]]:
                 if len(problems) < 10:
                     problems.append(f"record {i} {ma.get_type()}.{key}: {va!r} vs {db.get(key)!r}")
     ok = not problems and stats["fields_failing"] == 0
-    return ("agrees" if ok else "DIFFERS"), stats, problems
+    return ("agrees" if ok else "DIFFERS"), stats, declared + problems
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("dirs", nargs="*", type=Path, help="REF_DIR NEW_DIR")
     parser.add_argument("--replay", type=Path, help="replay every fixture into this directory")
+    parser.add_argument(
+        "--new-text",
+        action="append",
+        default=[],
+        metavar="PREFIX",
+        help="an intended new STATUSTEXT (text prefix, e.g. 'CMP RTK_BACK'): left out of NEW",
+    )
     args = parser.parse_args()
     if args.replay is not None:
         replay_all(args.replay)
@@ -168,7 +194,7 @@ def main() -> int:
             failures += 1
             continue
         print(f"comparing {ref.name} ...", file=sys.stderr, flush=True)
-        verdict, stats, problems = compare_file(ref, new)
+        verdict, stats, problems = compare_file(ref, new, tuple(args.new_text))
         totals.update(stats)
         failures += verdict == "DIFFERS"
         print(

@@ -35,6 +35,12 @@ def _progress(line: str) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from companion.mavlink.link import parse_url
+
+    # a malformed URL fails now, before the slow imports (the config checks it again)
+    for url in (args.master, args.gcs):
+        if url:
+            parse_url(url)
     from companion.config import load_config
     from companion.service import run_service
 
@@ -167,23 +173,32 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     _setup_logging(args.log_level)
-    from companion.config import ConfigError
-    from companion.evaluate import EvaluationError
-    from companion.mavlink.link import LinkError
-    from companion.mavlink.tlog import TlogError
-
-    expected = (
-        ConfigError,
-        ValueError,
-        FileNotFoundError,
-        TlogError,
-        EvaluationError,
-        LinkError,
-    )
     try:
         return int(args.func(args))
-    except expected as exc:
-        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_FAILURE
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:
+        if not isinstance(exc, _expected_errors()):
+            raise
+        print(f"companion {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+_EXPECTED_ERRORS = (
+    ("companion.config", "ConfigError"),
+    ("companion.evaluate.results", "EvaluationError"),
+    ("companion.mavlink.link", "LinkError"),
+    ("companion.mavlink.tlog", "TlogError"),
+)
+"""The package's exceptions a user can cause (one line, exit 1), by module."""
+
+
+def _expected_errors() -> tuple[type[Exception], ...]:
+    """ValueError, FileNotFoundError and those of :data:`_EXPECTED_ERRORS` whose module is
+    loaded (an exception cannot come from a module never imported): nothing is imported
+    here, so a bad command line fails before the package's slow imports."""
+    found: list[type[Exception]] = [ValueError, FileNotFoundError]
+    for module, name in _EXPECTED_ERRORS:
+        if module in sys.modules:
+            found.append(getattr(sys.modules[module], name))
+    return tuple(found)

@@ -30,6 +30,7 @@ from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
+from companion.mavlink.link import LinkError, parse_url
 from companion.mavlink.signing import SigningConfig
 from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
@@ -61,11 +62,24 @@ class LinkConfig:
     """Where the heading correction of the current flight is kept across a restart."""
     record_dir: str = "/var/lib/companion/logs"
     """Flight recorder folder (every message in and out, as .tlog); empty to disable."""
+    no_autopilot_warn_s: float = ranged(5.0, gt=0.0)
+    """Warn when the autopilot link goes this long without an autopilot HEARTBEAT, with what
+    it delivered (bytes, frames, bad frames): wrong baud rate, not MAVLink, wrong port?"""
+    no_autopilot_repeat_s: float = ranged(30.0, gt=0.0)
+    """... and again at this interval until one arrives."""
 
     def __post_init__(self) -> None:
         check_ranges(self)
         if not self.master:
             raise ValueError("master must name a link")
+        # a malformed URL is fatal here, at load; a link that cannot open is retried
+        for key in ("master", "gcs"):
+            url = getattr(self, key)
+            if url:
+                try:
+                    parse_url(url, self.baud)
+                except LinkError as exc:
+                    raise ValueError(f"{key}: {exc}") from None
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,6 +10,7 @@ output (docs/replay.md).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from collections.abc import Callable
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
-from companion.mavlink.tlog import TlogReader, TlogWriter
+from companion.mavlink.tlog import TlogError, TlogReader, TlogWriter, describe_file
 from companion.pipeline import Pipeline
 
 log = logging.getLogger(__name__)
@@ -62,18 +63,24 @@ def replay(
 ) -> ReplaySummary:
     """Feed ``in_path`` through a :class:`Pipeline`, writing what it sends to ``out_path``.
 
-    Raises ``companion.mavlink.tlog.TlogError`` when the input cannot be read.
+    Raises ``companion.mavlink.tlog.TlogError`` when the input cannot be read: missing,
+    another format, or no record in it (the message says what the file looks like; no
+    output is written then). A tlog with some corrupt records replays the rest.
     """
-    pipeline = Pipeline(config)
     # the decoder is the only consumer of the messages: light messages where it takes them
     reader = TlogReader(in_path, light_ids=LIGHT_MESSAGE_IDS)
+    records = iter(reader)
+    first_record = next(records, None)
+    if first_record is None:  # before the pipeline is built: the error is all that is said
+        raise TlogError(f"{in_path}: no tlog record: {describe_file(in_path)}")
+    pipeline = Pipeline(config)
     wall0 = time.perf_counter()
     first_t: float | None = None
     last_t = 0.0
     due_s = pipeline.next_due_s()
     count = 0
     with TlogWriter(out_path) as writer:
-        for t_rx_s, msg in reader:
+        for t_rx_s, msg in itertools.chain((first_record,), records):
             if first_t is None:
                 first_t = t_rx_s
             last_t = t_rx_s

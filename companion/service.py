@@ -6,11 +6,17 @@ Tasks:
   bytes -> :class:`~companion.mavlink.framing.FrameParser` -> pipeline -> frames
   sent to every open link and to the flight recorder. A link that drops is
   re-opened every ``reconnect_s`` until it comes back (a serial adapter
-  unplugged and plugged in again, a TCP peer restarting).
-* the timer: sleeps until the pipeline's next due time and sends its periodic
-  output (our HEARTBEAT at ``heartbeat_rate_hz``); the systemd watchdog is fed
-  from the same loop, at least twice per watchdog timeout, only while every
-  reader task is alive.
+  unplugged and plugged in again, a TCP peer restarting); the failed opens are
+  logged with backoff (the 1st, 2nd, 4th, 8th ... and then every 64th, or when the
+  reason changes). A malformed URL is no such failure: :meth:`Service.run` raises
+  :class:`~companion.mavlink.link.LinkUrlError` before starting anything. The
+  autopilot link's reader counts what it delivers (bytes, frames, bad frames) and
+  its autopilot HEARTBEATs in a :class:`~companion.mavlink.watch.HeartbeatWatch`.
+* the timer: sleeps until the pipeline's or the watch's next due time, sends the
+  pipeline's periodic output (our HEARTBEAT at ``heartbeat_rate_hz``) and logs the
+  watch's warning (no autopilot HEARTBEAT for ``no_autopilot_warn_s``, then every
+  ``no_autopilot_repeat_s``); the systemd watchdog is fed from the same loop, at
+  least twice per watchdog timeout, only while every reader task is alive.
 
 SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
 recorder flushed, exit status 0.
@@ -41,8 +47,9 @@ from pathlib import Path
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.framing import FrameParser
-from companion.mavlink.link import Link, LinkError, UdpLink, open_link
+from companion.mavlink.link import Link, LinkError, UdpLink, open_link, parse_url
 from companion.mavlink.signing import LinkSigning, load_key, timestamp_at
+from companion.mavlink.watch import HeartbeatWatch
 from companion.notify import SystemdNotifier
 from companion.pipeline import Pipeline
 from companion.recorder import Recorder
@@ -53,6 +60,14 @@ SIGNING_STATE_FILE = "signing.json"
 """The signing timestamp's file, in the folder of ``link.state_file``."""
 SIGNING_SAVE_PERIOD_S = 10.0
 """How often the signing timestamp is stored (MAVLink asks for at least once a minute)."""
+RETRY_LOG_EVERY_MAX = 64
+"""Failed opens of a link between two of its warnings, at most (once a minute or so)."""
+
+
+def _log_retry(failures: int) -> bool:
+    """Whether the ``failures``-th failed open in a row is logged: 1, 2, 4, ... 64, then
+    every 64th."""
+    return failures & (failures - 1) == 0 or failures % RETRY_LOG_EVERY_MAX == 0
 
 
 class Service:
@@ -68,6 +83,13 @@ class Service:
         self.recorder: Recorder | None = None
         self.links_opened = 0
         self._saved_changes = 0
+        link_cfg = config.link
+        self.watch = HeartbeatWatch(
+            f"master {link_cfg.master}",
+            link_cfg.no_autopilot_warn_s,
+            link_cfg.no_autopilot_repeat_s,
+        )
+        """The autopilot link's HEARTBEAT watch (docs/mavlink.md, link health)."""
         self._load_state()
         self._signing_saved_at_s = -math.inf
         """When the signing timestamp was last stored (wall clock, s)."""
@@ -87,14 +109,16 @@ class Service:
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, self.stop)
         link_cfg = self.config.link
+        urls = {"autopilot": link_cfg.master}
+        if link_cfg.gcs:
+            urls["gcs"] = link_cfg.gcs
+        for url in urls.values():
+            parse_url(url, link_cfg.baud)  # malformed: LinkUrlError, fatal (never retried)
         if link_cfg.record_dir:
             try:
                 self.recorder = Recorder(Path(link_cfg.record_dir), time.time())
             except OSError as exc:
                 log.error("flight recorder disabled: cannot write %s: %s", link_cfg.record_dir, exc)
-        urls = {"autopilot": link_cfg.master}
-        if link_cfg.gcs:
-            urls["gcs"] = link_cfg.gcs
         self._readers = [
             asyncio.create_task(self._reader(name, url), name=f"reader-{name}")
             for name, url in urls.items()
@@ -140,22 +164,34 @@ class Service:
             light_ids=LIGHT_MESSAGE_IDS,
             frame_check=signing.accept if signing is not None else None,
         )
+        watch = self.watch if name == "autopilot" else None
+        failures = 0
+        last_reason = ""
         while not self._stop.is_set():
             try:
                 link = await open_link(url, self.config.link.baud)
             except LinkError as exc:
-                log.warning(
-                    "%s link %s: %s; retrying in %.1f s",
-                    name,
-                    url,
-                    exc,
-                    self.config.link.reconnect_s,
-                )
+                failures += 1
+                if _log_retry(failures) or str(exc) != last_reason:
+                    log.warning(
+                        "%s link %s: %s; retrying every %.1f s (%d failed)",
+                        name,
+                        url,
+                        exc,
+                        self.config.link.reconnect_s,
+                        failures,
+                    )
+                last_reason = str(exc)
                 await asyncio.sleep(self.config.link.reconnect_s)
                 continue
             self._links[name] = link
             self.links_opened += 1
-            log.info("%s link open: %s", name, url)
+            log.info(
+                "%s link open: %s%s", name, url, f" after {failures} failed" if failures else ""
+            )
+            failures, last_reason = 0, ""
+            if watch is not None:
+                watch.start(time.time())
             # a signing udpin link replies only to senders of frames it accepted
             adopt = None
             if signing is not None and isinstance(link, UdpLink) and link.listen:
@@ -165,7 +201,7 @@ class Service:
                 while True:
                     data = await link.recv()
                     good_before = parser.good_frames
-                    await self._on_bytes(parser, data)
+                    await self._on_bytes(parser, data, watch)
                     if adopt is not None and parser.good_frames > good_before:
                         adopt()
             except LinkError as exc:
@@ -268,15 +304,31 @@ class Service:
             return
         self._signing_saved = timestamp
 
-    async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
+    async def _on_bytes(
+        self, parser: FrameParser, data: bytes, watch: HeartbeatWatch | None = None
+    ) -> None:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
+        bad_bytes_before = parser.bad_bytes
         messages = parser.feed(data)
         self.pipeline.bad_frames(parser.bad_frames - bad_before)
+        if watch is not None:
+            watch.received(
+                len(data),
+                len(messages),
+                parser.bad_frames - bad_before,
+                parser.bad_bytes - bad_bytes_before,
+            )
+        decoder = self.pipeline.decoder
         for msg in messages:
             if self.recorder is not None:
                 self.recorder.record(t_rx_s, bytes(msg.get_msgbuf()))
+            beats = decoder.autopilot_heartbeats
             frames = self.pipeline.on_message(msg, t_rx_s)
+            if watch is not None and decoder.autopilot_heartbeats != beats:
+                line = watch.heartbeat(t_rx_s)
+                if line:
+                    log.info("%s", line)
             if frames:
                 await self._send(frames, t_rx_s)
             if self.pipeline.engine.state_changes != self._saved_changes:
@@ -309,11 +361,15 @@ class Service:
                 await self._send(frames, now_s)
             if now_s - self._signing_saved_at_s >= SIGNING_SAVE_PERIOD_S:
                 self._save_signing(now_s)
+            warning = self.watch.check(now_s)
+            if warning:
+                log.warning("%s", warning)
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:
                 log.error("a link reader has died: not feeding the watchdog")
-            sleep_s = min(self.pipeline.next_due_s() - time.time(), max_sleep_s)
+            due_s = min(self.pipeline.next_due_s(), self.watch.next_due_s())
+            sleep_s = min(due_s - time.time(), max_sleep_s)
             await asyncio.sleep(max(sleep_s, 0.0))
 
 

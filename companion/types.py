@@ -122,6 +122,7 @@ class AlertCode(enum.Enum):
 
     GNSS_LOST = "GNSS_LOST"
     RTK_LOST = "RTK_LOST"
+    RTK_BACK = "RTK_BACK"
     GNSS_STALE = "GNSS_STALE"
     BRIDGING = "BRIDGING"
     GNSS_BACK = "GNSS_BACK"

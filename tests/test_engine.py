@@ -100,6 +100,22 @@ def test_fix_type_published_is_honest():
     assert all(s.fix_type <= FixType.FIX_3D for s in sols if s.mode is NavMode.BRIDGING)
 
 
+def test_rtk_outage_raises_rtk_lost_then_rtk_back():
+    """A synthetic 8 s RTK-correction outage (RTK fixed -> 3D -> RTK fixed) in a flight with
+    continuous GNSS: one RTK_LOST at its start, one RTK_BACK at its end, no GNSS_LOST."""
+
+    def fix_type_at(rel):
+        return FixType.FIX_3D if 6.0 <= rel < 14.0 else FixType.RTK_FIXED
+
+    _, outs = run(line_stream(20.0, fix_type_at=fix_type_at))
+    lost = alerts(outs, AlertCode.RTK_LOST)
+    back = alerts(outs, AlertCode.RTK_BACK)
+    assert [a.text for a in lost] == ["rx0 -> FIX_3D"]
+    assert [a.text for a in back] == ["rx0 -> RTK_FIXED after 8.0 s"]
+    assert lost[0].t_s == pytest.approx(16.0) and back[0].t_s == pytest.approx(24.0)
+    assert not alerts(outs, AlertCode.GNSS_LOST)
+
+
 def test_stale_repeated_fixes_are_flagged_and_never_fused():
     engine = Engine()
     line = Line()

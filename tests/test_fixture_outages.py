@@ -1,5 +1,6 @@
 """The outage acceptance on the bundled flights: stale fixes are flagged within 2 s
-and never fused, and after every outage the first fix fused has passed the gate."""
+and never fused, after every outage the first fix fused has passed the gate, and every
+RTK_LOST is followed by its RTK_BACK when RTK returns."""
 
 from __future__ import annotations
 
@@ -88,3 +89,29 @@ def test_after_every_outage_the_first_fused_fix_passed_the_gate(name, config, ga
     for o in firsts:
         assert o.gate, f"t={o.t_s:.2f} s: fused after an outage without the gate"
         assert o.nis <= o.threshold
+
+
+@pytest.mark.parametrize(
+    ("name", "config", "lost_after_s", "back_type"),
+    [
+        # corrections extrapolated 3 s, then RTK float 5 s, then 3D until they return
+        ("approach_rtk20", "tactical.toml", 8.0, "RTK_FLOAT"),
+        ("approach_rtk40", None, 8.0, "RTK_FLOAT"),
+        # a receiver downgraded to 3D for 20 s, then RTK fixed again
+        ("px4_rotorcraft", None, 0.0, "RTK_FIXED"),
+    ],
+)
+def test_every_rtk_lost_has_its_rtk_back_when_rtk_returns(
+    name, config, lost_after_s, back_type, monkeypatch
+):
+    cfg = load_config(FIXTURES / config) if config else Config()
+    pipeline, _, events = _replay(name, cfg, monkeypatch)
+    rtk = [a for a in pipeline.alerts if a.code in (AlertCode.RTK_LOST, AlertCode.RTK_BACK)]
+    assert [a.code for a in rtk] == [AlertCode.RTK_LOST, AlertCode.RTK_BACK], rtk
+    lost, back = rtk
+    (event,) = events
+    t0, t1 = event["t_start_s"], event["t_end_s"]
+    # one fix period (0.1 s at 10 Hz, 0.2 s at PX4's 5 Hz) after each edge
+    assert t0 + lost_after_s <= lost.t_s <= t0 + lost_after_s + 0.25
+    assert t1 <= back.t_s <= t1 + 0.25
+    assert back.text == f"rx0 -> {back_type} after {back.t_s - lost.t_s:.1f} s"

@@ -35,7 +35,7 @@ from companion.evaluate.truth import (
     sidecar_path,
 )
 from companion.mavlink.readback import read_tlog
-from companion.mavlink.tlog import TlogError
+from companion.mavlink.tlog import TlogError, describe_file
 
 _log = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ def _read_tlog(path: Path) -> tuple[list[tuple[float, Any]], TlogStats]:
     except TlogError as exc:
         raise EvaluationError(str(exc)) from exc
     bad = contents.bad_regions
-    if bad:
+    if bad and contents.records:  # with none, evaluate says what the file is
         _log.warning("%s: skipped %d corrupt tlog region(s)", path, bad)
     return contents.records, TlogStats(
         records=len(contents.records),
@@ -99,7 +99,7 @@ def evaluate(out_tlog: Path, truth_csv: Path, events_json: Path | None = None) -
         events_path = candidate if candidate.is_file() else None
     records, tstats = _read_tlog(out_tlog)
     if not records:
-        raise EvaluationError(f"unreadable tlog {out_tlog}: no MAVLink record found")
+        raise EvaluationError(f"{out_tlog}: no tlog record: {describe_file(out_tlog)}")
     pub = extract_publications(records, out_tlog)
     truth = read_truth(truth_csv)
     sidecar: dict[str, Any] = {}

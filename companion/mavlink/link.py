@@ -19,6 +19,12 @@ URLs
     server; accepts any number of clients, receives from all, sends to all.
     A client leaving is not an error.
 
+A malformed URL (unknown scheme, no port, a port or baud rate that is not a
+number, a dotted address that is not IPv4) raises :class:`LinkUrlError` from
+:func:`parse_url`: no retry can fix it, so the service refuses to start. A
+well-formed URL that cannot be opened now (device absent, port busy, peer not
+listening) raises the plain :class:`LinkError`: worth retrying.
+
 Reconnection policy: :func:`open_link` opens once (``LinkError`` if it
 cannot). :func:`reconnecting` returns a :class:`ReconnectingLink` that re-opens
 the URL with exponential backoff whenever it drops (a serial device unplugged
@@ -35,6 +41,7 @@ import abc
 import asyncio
 import collections
 import contextlib
+import ipaddress
 import logging
 import os
 import socket
@@ -50,16 +57,34 @@ class LinkError(Exception):
     """The link cannot be opened, or it dropped."""
 
 
-def _split_host_port(rest: str, url: str) -> tuple[str, int]:
+class LinkUrlError(LinkError):
+    """The link URL is malformed: fatal, never retried (a :class:`LinkError`, so that
+    callers catching that still catch it)."""
+
+
+_LISTENING = ("udpin", "tcpin")
+"""Kinds for which port 0 (any free port) makes sense."""
+
+
+def _split_host_port(rest: str, url: str, kind: str) -> tuple[str, int]:
     host, sep, port_s = rest.rpartition(":")
     if not sep or not host:
-        raise LinkError(f"bad link URL {url!r}: expected host:port")
-    try:
-        port = int(port_s)
-    except ValueError as exc:
-        raise LinkError(f"bad link URL {url!r}: port {port_s!r} is not a number") from exc
+        scheme = url.partition(":")[0]
+        raise LinkUrlError(f"bad link URL {url!r}: expected {scheme}:HOST:PORT")
+    if not port_s.isdigit():
+        raise LinkUrlError(f"bad link URL {url!r}: port {port_s!r} is not a number")
+    port = int(port_s)
     if not 0 <= port <= 65535:
-        raise LinkError(f"bad link URL {url!r}: port out of range")
+        raise LinkUrlError(f"bad link URL {url!r}: port {port} out of range 0-65535")
+    if port == 0 and kind not in _LISTENING:
+        raise LinkUrlError(f"bad link URL {url!r}: port 0 can only listen (udpin, tcpin)")
+    if host.replace(".", "").isdigit():
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            raise LinkUrlError(f"bad link URL {url!r}: {host!r} is not an IPv4 address") from None
+    elif any(c.isspace() for c in host):
+        raise LinkUrlError(f"bad link URL {url!r}: blank in host {host!r}")
     return host, port
 
 
@@ -72,25 +97,36 @@ def parse_url(url: str, baud: int = 57600) -> tuple[str, Any, Any]:
 
     Raises
     ------
-    LinkError
-        On a malformed URL.
+    LinkUrlError
+        On a malformed URL (the message says what is wrong and what was expected).
     """
     if url.startswith("/"):
-        return "serial", url, baud
+        return "serial", url, _check_baud(baud, url)
     scheme, sep, rest = url.partition(":")
     if not sep or not rest:
-        raise LinkError(f"bad link URL {url!r}")
+        raise LinkUrlError(
+            f"bad link URL {url!r}: expected serial:DEVICE[:BAUD], a device path, "
+            "udpin:, udpout:, tcp: or tcpin:HOST:PORT"
+        )
     if scheme == "serial":
         path, sep2, baud_s = rest.rpartition(":")
         if sep2 and baud_s.isdigit() and path:
-            return "serial", path, int(baud_s)
-        return "serial", rest, baud
+            return "serial", path, _check_baud(int(baud_s), url)
+        return "serial", rest, _check_baud(baud, url)
     if scheme == "udp":
         scheme = "udpin"
     if scheme in ("udpin", "udpout", "tcp", "tcpin"):
-        host, port = _split_host_port(rest, url)
+        host, port = _split_host_port(rest, url, scheme)
         return scheme, host, port
-    raise LinkError(f"bad link URL {url!r}: unknown scheme {scheme!r}")
+    raise LinkUrlError(
+        f"bad link URL {url!r}: unknown scheme {scheme!r} (serial, udpin, udp, udpout, tcp, tcpin)"
+    )
+
+
+def _check_baud(baud: int, url: str) -> int:
+    if baud <= 0:
+        raise LinkUrlError(f"bad link URL {url!r}: baud rate {baud} must be > 0")
+    return baud
 
 
 class Link(abc.ABC):
@@ -629,6 +665,7 @@ async def reconnecting(
 __all__ = [
     "Link",
     "LinkError",
+    "LinkUrlError",
     "ReconnectingLink",
     "SerialLink",
     "TcpClientLink",

@@ -25,6 +25,12 @@ open (:class:`TlogError`). What it skips, it counts in :attr:`TlogReader.stats`:
     ``resync_records`` consecutive skipped records agreed with each other (the
     recording clock really stepped): the reader accepts the new clock from the
     last of them on. The earlier ones of the run stay skipped.
+
+A file that is plainly something else (an ArduPilot DataFlash ``.bin``, a PX4
+``.ulg``, an image, an archive), judged by its first bytes and never by its name, is
+refused at once with a :class:`TlogError` that says what it is and what to do; a
+record's 8-byte UNIX-epoch or boot-time stamp never starts with those bytes. For a
+file in which no record was found, :func:`describe_file` says what it looks like.
 """
 
 from __future__ import annotations
@@ -38,7 +44,7 @@ from types import TracebackType
 from typing import Any, BinaryIO
 
 from companion.mavlink.dialect import load_dialect
-from companion.mavlink.framing import FRAME_BAD, FRAME_NEED_MORE, try_frame
+from companion.mavlink.framing import FRAME_BAD, FRAME_NEED_MORE, FrameParser, try_frame
 from companion.mavlink.ids import CRC_LEN, HEADER_LEN_V2, STX_V1, STX_V2
 from companion.mavlink.messages import FastDecoder
 from companion.mavlink.units import US_PER_S
@@ -54,7 +60,73 @@ _V2_OVERHEAD = HEADER_LEN_V2 + CRC_LEN
 
 
 class TlogError(Exception):
-    """The log cannot be read at all (missing, unreadable, a directory...)."""
+    """The log cannot be read at all (missing, unreadable, a directory, another format...)."""
+
+
+_USE_TLOG = "use the flight's .tlog (ground station, MAVProxy or the flight recorder)"
+_FOREIGN_FORMATS: tuple[tuple[bytes, str], ...] = (
+    (
+        b"\xa3\x95",
+        f"an ArduPilot DataFlash log (.bin), not a .tlog: reading .bin is planned; {_USE_TLOG}",
+    ),
+    (
+        b"ULog",
+        f"a PX4 ULog (.ulg), not a .tlog: reading .ulg is planned; {_USE_TLOG}",
+    ),
+    (b"\x89PNG\r\n\x1a\n", "a PNG image, not a .tlog"),
+    (b"\xff\xd8\xff", "a JPEG image, not a .tlog"),
+    (b"%PDF", "a PDF document, not a .tlog"),
+    (b"\x1f\x8b", "gzip-compressed: decompress it first (gunzip)"),
+    (b"PK\x03\x04", "a zip archive: extract the .tlog first"),
+)
+"""Magic numbers of files taken for a .tlog by mistake, and what to say about them."""
+_TEXT_SNIFF_BYTES = 4096
+_RAW_SNIFF_BYTES = 65536
+_RAW_MIN_FRAMES = 3
+"""Good frames in the first 64 KiB that make a file without records a raw MAVLink stream."""
+
+
+def foreign_format(head: bytes) -> str | None:
+    """What a file starting with ``head`` is, when its magic number says it is no .tlog."""
+    for magic, what in _FOREIGN_FORMATS:
+        if head.startswith(magic):
+            return what
+    return None
+
+
+def describe_file(path: Path | str) -> str:
+    """One line on what ``path`` looks like, for a file in which no record was found:
+    empty, a known other format, raw MAVLink frames without record stamps, text (with
+    its first line) or other binary data."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_RAW_SNIFF_BYTES)
+            size = fh.seek(0, 2)
+    except OSError as exc:
+        return f"unreadable: {exc.strerror or exc}"
+    if not head:
+        return "an empty file"
+    known = foreign_format(head)
+    if known is not None:
+        return known
+    parser = FrameParser()
+    if len(parser.feed(head)) >= _RAW_MIN_FRAMES:
+        return (
+            f"raw MAVLink frames without the tlog's 8-byte time stamps ({size} bytes): "
+            "not a .tlog (mavlogdump.py --no-timestamps reads it)"
+        )
+    sample = head[:_TEXT_SNIFF_BYTES]
+    try:
+        text = sample.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        # a multi-byte character cut at the end of the sample is still text
+        text = sample[: exc.start].decode("utf-8") if exc.start >= len(sample) - 3 else ""
+    if text and all(c.isprintable() or c in "\r\n\t" for c in text):
+        first = text.splitlines()[0].strip() if text.strip() else ""
+        shown = first if len(first) <= 40 else first[:37] + "..."
+        return f"a text file ({size} bytes, first line {shown!r}), not a .tlog"
+    return f"binary data ({size} bytes), not a .tlog"
 
 
 class TlogReader:
@@ -81,7 +153,8 @@ class TlogReader:
     Raises
     ------
     TlogError
-        At construction, if the file cannot be opened.
+        At construction, if the file cannot be opened or its first bytes say it is
+        another format (:func:`foreign_format`).
     """
 
     def __init__(
@@ -103,8 +176,14 @@ class TlogReader:
         self._resync = max(1, int(resync_records))
         try:
             fh = open(self.path, "rb")  # noqa: SIM115 - closed in __iter__
+            head = fh.read(16)
+            fh.seek(0)
         except OSError as exc:
             raise TlogError(f"cannot open tlog {self.path}: {exc.strerror or exc}") from exc
+        foreign = foreign_format(head)
+        if foreign is not None:
+            fh.close()
+            raise TlogError(f"{self.path}: {foreign}")
         self._fh: BinaryIO | None = fh
         self.stats: collections.Counter[str] = collections.Counter()
         self.messages = 0
@@ -227,7 +306,7 @@ class TlogReader:
                 stats["truncated_record"] += 1
         finally:
             self.close()
-        if stats:
+        if stats and self.messages:  # with none, the caller says what the file is
             logger.info("tlog %s: %d messages; skipped %s", self.path, self.messages, dict(stats))
 
 

@@ -1,10 +1,10 @@
 """Outage management: is a GNSS fix usable, and which mode is the navigation in?
 
 Detects loss (message timeout, no fix), downgrade (RTK fixed -> float -> DGPS/3D
--> none, an accuracy jump, old RTK corrections) and stale fixes (the receiver
-repeating or freezing its last corrected co-ordinates while the aircraft moves:
-the failure Grzegorzewski (2005) reports from flight trials, with errors up to
-2 km at jet speed). It runs the mode machine
+-> none, an accuracy jump, old RTK corrections: RTK_LOST, then RTK_BACK when RTK
+returns) and stale fixes (the receiver repeating or freezing its last corrected
+co-ordinates while the aircraft moves: the failure Grzegorzewski (2005) reports
+from flight trials, with errors up to 2 km at jet speed). It runs the mode machine
 
     INIT -> NORMAL <-> DEGRADED
               |  ^          |
@@ -112,6 +112,9 @@ class _ReceiverState:
     best_hacc_m: float = math.inf
     best_hacc_t_s: float = -math.inf
     was_rtk: bool = False
+    rtk_lost_t_s: float | None = None
+    """When this receiver's RTK_LOST was raised; None when RTK was not lost (RTK_BACK
+    is raised only for a receiver that announced RTK_LOST)."""
     stale: bool = False
 
 
@@ -345,6 +348,11 @@ class OutageMonitor:
             alerts.append(
                 Alert(t, AlertCode.RTK_LOST, Severity.WARNING, f"rx{fix.receiver_id} -> {why}")
             )
+            rx.rtk_lost_t_s = t
+        elif is_rtk and rx.rtk_lost_t_s is not None:
+            text = f"rx{fix.receiver_id} -> {FixType(ftype).name} after {t - rx.rtk_lost_t_s:.1f} s"
+            alerts.append(Alert(t, AlertCode.RTK_BACK, Severity.NOTICE, text))
+            rx.rtk_lost_t_s = None
         rx.was_rtk = is_rtk
         if fix.h_acc_m is not None:
             if fix.h_acc_m <= rx.best_hacc_m or t - rx.best_hacc_t_s > cfg.downgrade_memory_s:

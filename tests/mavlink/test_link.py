@@ -14,6 +14,7 @@ import pytest
 
 from companion.mavlink.link import (
     LinkError,
+    LinkUrlError,
     ReconnectingLink,
     TcpServerLink,
     UdpLink,
@@ -53,9 +54,43 @@ def test_parse_url() -> None:
     assert parse_url("udpin:0.0.0.0:14550") == ("udpin", "0.0.0.0", 14550)
     assert parse_url("udp:0.0.0.0:14550") == ("udpin", "0.0.0.0", 14550)
     assert parse_url("tcpin:127.0.0.1:5760") == ("tcpin", "127.0.0.1", 5760)
-    for bad in ("bogus:1:2", "tcp:localhost", "udpout:127.0.0.1:x", "tcp:127.0.0.1:70000", ""):
-        with pytest.raises(LinkError):
+    assert parse_url("udpin:127.0.0.1:0") == ("udpin", "127.0.0.1", 0)  # any free port
+    # a by-path device name has colons of its own
+    by_path = "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1:1.0-port0"
+    assert parse_url(f"serial:{by_path}", 9600) == ("serial", by_path, 9600)
+    for bad, why in (
+        ("bogus:1:2", "unknown scheme 'bogus'"),
+        ("udpot:127.0.0.1:14550", "unknown scheme 'udpot'"),
+        ("tcp:localhost", "expected tcp:HOST:PORT"),
+        ("udpin:127.0.0.1", "expected udpin:HOST:PORT"),
+        ("udpout:127.0.0.1:x", "port 'x' is not a number"),
+        ("udpout:127.0.0.1:-1", "port '-1' is not a number"),
+        ("tcp:127.0.0.1:70000", "out of range"),
+        ("tcp:127.0.0.1:0", "port 0 can only listen"),
+        ("udpout:127.0.0.300:14550", "not an IPv4 address"),
+        ("serial:/dev/ttyUSB0:0", "baud rate 0"),
+        ("", "expected serial:DEVICE"),
+    ):
+        with pytest.raises(LinkUrlError, match=why):
             parse_url(bad)
+
+
+def test_a_well_formed_url_that_cannot_open_is_not_malformed() -> None:
+    """Device absent, port busy: a plain LinkError (the service retries), not LinkUrlError."""
+
+    async def main() -> None:
+        with pytest.raises(LinkError) as absent:
+            await open_link("serial:/dev/companion-test-no-such-device:57600")
+        assert not isinstance(absent.value, LinkUrlError)
+        holder = await open_link("udpin:127.0.0.1:0")
+        try:
+            with pytest.raises(LinkError) as busy:
+                await open_link(f"udpin:127.0.0.1:{holder.local_port}")
+            assert not isinstance(busy.value, LinkUrlError)
+        finally:
+            await holder.close()
+
+    run(main())
 
 
 def test_udp_in_out_round_trip() -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from companion.nav.outage import OutageConfig, OutageMonitor
-from companion.types import AlertCode, FixType, NavMode
+from companion.types import AlertCode, FixType, NavMode, Severity
 from tests.helpers import Line, fix_at
 
 LINE = Line((30.0, 0.0, 0.0))
@@ -80,6 +80,55 @@ def test_downgrade_rtk_lost_once_and_degraded_mode():
     assert mon.mode is NavMode.DEGRADED
     v = mon.assess(fix(2.2, fix_type=FixType.FIX_3D, h_acc_m=2.0), 30.0)
     assert codes(v.alerts) == []
+
+
+def test_rtk_back_follows_each_rtk_lost_once():
+    """A receiver that announced RTK_LOST says RTK_BACK (with the outage's length) on its
+    first RTK fix again, once; float counts as RTK; a receiver reaching RTK for the first
+    time, or still without it, says nothing."""
+    mon = OutageMonitor()
+    # converging: 3D, then RTK for the first time is no return
+    for k in range(10):
+        v = mon.assess(fix(k / 10, fix_type=FixType.FIX_3D, h_acc_m=1.0), 30.0)
+        assert codes(v.alerts) == []
+        mon.gate_result(k / 10, True)
+    assert codes(mon.assess(fix(1.0), 30.0).alerts) == []
+    mon.gate_result(1.0, True)
+    assert codes(mon.assess(fix(1.1, fix_type=FixType.DGPS), 30.0).alerts) == [AlertCode.RTK_LOST]
+    for k in range(2, 30):  # the outage: nothing more
+        assert codes(mon.assess(fix(1.0 + k / 10, fix_type=FixType.FIX_3D), 30.0).alerts) == []
+    back = mon.assess(fix(4.1, fix_type=FixType.RTK_FLOAT, h_acc_m=0.3), 30.0).alerts
+    assert codes(back) == [AlertCode.RTK_BACK]
+    assert back[0].severity is Severity.NOTICE
+    assert back[0].text == "rx0 -> RTK_FLOAT after 3.0 s"
+    assert codes(mon.assess(fix(4.2), 30.0).alerts) == []  # float -> fixed: still RTK
+    # a second outage, ended by fresh corrections: its own pair
+    old = replace(fix(5.0), dgps_age_s=12.0)
+    assert codes(mon.assess(old, 30.0).alerts) == [AlertCode.RTK_LOST]
+    fresh = replace(fix(6.5), dgps_age_s=1.0)
+    back = mon.assess(fresh, 30.0).alerts
+    assert codes(back) == [AlertCode.RTK_BACK]
+    assert back[0].text == "rx0 -> RTK_FIXED after 1.5 s"
+
+
+def test_rtk_back_is_per_receiver_and_forgotten_on_reset():
+    mon = OutageMonitor()
+    start(mon)
+    mon.assess(fix(2.0, receiver_id=1), 30.0)
+    assert codes(mon.assess(fix(2.1, fix_type=FixType.FIX_3D, receiver_id=1), 30.0).alerts) == [
+        AlertCode.RTK_LOST
+    ]
+    # receiver 0 stayed RTK: its fixes say nothing; receiver 1's return is its own
+    assert codes(mon.assess(fix(2.2), 30.0).alerts) == []
+    back = mon.assess(fix(2.3, receiver_id=1), 30.0).alerts
+    assert [(a.code, a.text) for a in back] == [
+        (AlertCode.RTK_BACK, "rx1 -> RTK_FIXED after 0.2 s")
+    ]
+    # an outage cut by an autopilot reboot: the new boot's first RTK fix is no return
+    mon.assess(fix(3.0, fix_type=FixType.FIX_3D), 30.0)
+    mon.reset()
+    start(mon)
+    assert all(a.code is not AlertCode.RTK_BACK for a in mon.assess(fix(2.5), 30.0).alerts)
 
 
 def test_old_corrections_count_as_rtk_lost():

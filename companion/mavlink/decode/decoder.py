@@ -143,6 +143,12 @@ class Decoder:
         return self._vehicle.autopilot_component
 
     @property
+    def autopilot_heartbeats(self) -> int:
+        """HEARTBEATs recognised as the autopilot's (identity checked), with or without a
+        sample: the first ones come before any time is known (``no_time_yet``)."""
+        return self._vehicle.heartbeats
+
+    @property
     def reboots(self) -> int:
         """Reboots detected."""
         return self._clock.reboots

@@ -68,12 +68,16 @@ class VehicleDecoder:
         Component of the locked autopilot HEARTBEAT.
     flavour : AutopilotFlavour
         From the autopilot's HEARTBEAT (3 -> ARDUPILOT, 12 -> PX4).
+    heartbeats : int
+        HEARTBEATs recognised as the autopilot's, including those rejected
+        ``no_time_yet`` (the link carries the autopilot all the same).
     """
 
     def __init__(self, config: DecoderConfig, clock: BootClock) -> None:
         self.system_id: int | None = config.system_id
         self.autopilot_component: int | None = None
         self.flavour = AutopilotFlavour.UNKNOWN
+        self.heartbeats = 0
         self._time_ms = clock.time_ms
         self._now = clock.now
         self._max_speed = config.max_speed_mps
@@ -95,6 +99,7 @@ class VehicleDecoder:
             self.autopilot_component = src_comp
         elif src_comp != self.autopilot_component:
             raise Rejected("not_autopilot_component")
+        self.heartbeats += 1
         flavour = _AUTOPILOT_FLAVOUR.get(msg.autopilot, AutopilotFlavour.UNKNOWN)
         if flavour != self.flavour:
             logger.info("autopilot flavour: %s (MAV_AUTOPILOT %d)", flavour.value, msg.autopilot)
