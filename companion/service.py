@@ -8,7 +8,8 @@ Tasks:
   re-opened every ``reconnect_s`` until it comes back (a serial adapter
   unplugged and plugged in again, a TCP peer restarting).
 * the timer: sleeps until the pipeline's next due time and sends its periodic
-  output (our HEARTBEAT at ``heartbeat_rate_hz``); the systemd watchdog is fed
+  output (our HEARTBEAT at ``heartbeat_rate_hz``), or until the flight recorder's
+  next flush (at least every ``[recorder] flush_interval_s``); the systemd watchdog is fed
   from the same loop, at least twice per watchdog timeout, only while every
   reader task is alive.
 
@@ -70,7 +71,9 @@ class Service:
         link_cfg = self.config.link
         if link_cfg.record_dir:
             try:
-                self.recorder = Recorder(Path(link_cfg.record_dir), time.time())
+                self.recorder = Recorder(
+                    Path(link_cfg.record_dir), time.time(), self.config.recorder
+                )
             except OSError as exc:
                 log.error("flight recorder disabled: cannot write %s: %s", link_cfg.record_dir, exc)
         urls = {"autopilot": link_cfg.master}
@@ -185,7 +188,8 @@ class Service:
                 await link.send(frame)
 
     async def _timer(self) -> None:
-        """Send the pipeline's periodic output when due and feed the watchdog.
+        """Send the pipeline's periodic output when due, flush the recorder when due and
+        feed the watchdog.
 
         The pipeline's clock is the wall clock the readers stamp messages with
         (``time.time()``): its next due time is mapped to a sleep from now. The sleep
@@ -199,11 +203,15 @@ class Service:
             frames = self.pipeline.on_timer(now_s)
             if frames:
                 await self._send(frames, now_s)
+            due_s = self.pipeline.next_due_s()
+            if self.recorder is not None:  # flushes what the readers recorded meanwhile
+                self.recorder.tick(time.time())
+                due_s = min(due_s, self.recorder.next_due_s())
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:
                 log.error("a link reader has died: not feeding the watchdog")
-            sleep_s = min(self.pipeline.next_due_s() - time.time(), max_sleep_s)
+            sleep_s = min(due_s - time.time(), max_sleep_s)
             await asyncio.sleep(max(sleep_s, 0.0))
 
 
