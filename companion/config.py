@@ -37,6 +37,7 @@ from companion.nav.heading import HeadingConfig
 from companion.nav.outage import OutageConfig
 from companion.nav.potential import PotentialConfig
 from companion.ranges import check_ranges, ranged
+from companion.recorder import RecorderConfig
 
 
 class ConfigError(ValueError):
@@ -61,7 +62,8 @@ class LinkConfig:
     state_file: str = "/var/lib/companion/state.json"
     """Where the heading correction of the current flight is kept across a restart."""
     record_dir: str = "/var/lib/companion/logs"
-    """Flight recorder folder (every message in and out, as .tlog); empty to disable."""
+    """Flight recorder folder (every message in and out, as .tlog; caps in [recorder]);
+    empty to disable."""
     no_autopilot_warn_s: float = ranged(5.0, gt=0.0)
     """Warn when the autopilot link goes this long without an autopilot HEARTBEAT, with what
     it delivered (bytes, frames, bad frames): wrong baud rate, not MAVLink, wrong port?"""
@@ -115,6 +117,7 @@ class Config:
     """The whole configuration."""
 
     link: LinkConfig = field(default_factory=LinkConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
     streams: StreamsConfig = field(default_factory=StreamsConfig)
     engine: EngineConfig = field(default_factory=EngineConfig)
     outage: OutageConfig = field(default_factory=OutageConfig)

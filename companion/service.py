@@ -12,11 +12,13 @@ Tasks:
   :class:`~companion.mavlink.link.LinkUrlError` before starting anything. The
   autopilot link's reader counts what it delivers (bytes, frames, bad frames) and
   its autopilot HEARTBEATs in a :class:`~companion.mavlink.watch.HeartbeatWatch`.
-* the timer: sleeps until the pipeline's or the watch's next due time, sends the
-  pipeline's periodic output (our HEARTBEAT at ``heartbeat_rate_hz``) and logs the
-  watch's warning (no autopilot HEARTBEAT for ``no_autopilot_warn_s``, then every
-  ``no_autopilot_repeat_s``); the systemd watchdog is fed from the same loop, at
-  least twice per watchdog timeout, only while every reader task is alive.
+* the timer: sleeps until the pipeline's, the watch's or the flight recorder's next
+  due time; sends the pipeline's periodic output (our HEARTBEAT at
+  ``heartbeat_rate_hz``), logs the watch's warning (no autopilot HEARTBEAT for
+  ``no_autopilot_warn_s``, then every ``no_autopilot_repeat_s``) and flushes the
+  recorder (at least every ``[recorder] flush_interval_s``); the systemd watchdog is
+  fed from the same loop, at least twice per watchdog timeout, only while every
+  reader task is alive.
 
 SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
 recorder flushed, exit status 0.
@@ -116,7 +118,9 @@ class Service:
             parse_url(url, link_cfg.baud)  # malformed: LinkUrlError, fatal (never retried)
         if link_cfg.record_dir:
             try:
-                self.recorder = Recorder(Path(link_cfg.record_dir), time.time())
+                self.recorder = Recorder(
+                    Path(link_cfg.record_dir), time.time(), self.config.recorder
+                )
             except OSError as exc:
                 log.error("flight recorder disabled: cannot write %s: %s", link_cfg.record_dir, exc)
         self._readers = [
@@ -345,7 +349,8 @@ class Service:
                 await link.send(frame if signing is None else signing.sign(frame, now))
 
     async def _timer(self) -> None:
-        """Send the pipeline's periodic output when due and feed the watchdog.
+        """Send the pipeline's periodic output when due, flush the recorder when due and
+        feed the watchdog.
 
         The pipeline's clock is the wall clock the readers stamp messages with
         (``time.time()``): its next due time is mapped to a sleep from now. The sleep
@@ -364,11 +369,14 @@ class Service:
             warning = self.watch.check(now_s)
             if warning:
                 log.warning("%s", warning)
+            due_s = min(self.pipeline.next_due_s(), self.watch.next_due_s())
+            if self.recorder is not None:  # flushes what the readers recorded meanwhile
+                self.recorder.tick(time.time())
+                due_s = min(due_s, self.recorder.next_due_s())
             if all(not task.done() for task in self._readers):
                 self.notifier.notify("WATCHDOG=1")
             else:
                 log.error("a link reader has died: not feeding the watchdog")
-            due_s = min(self.pipeline.next_due_s(), self.watch.next_due_s())
             sleep_s = min(due_s - time.time(), max_sleep_s)
             await asyncio.sleep(max(sleep_s, 0.0))
 

@@ -53,6 +53,9 @@ logger = logging.getLogger(__name__)
 
 TIMESTAMP_LEN = 8
 _TS = struct.Struct(">Q")
+_TS_PACK = _TS.pack
+_MAX_T_S = 1.8e13
+"""Largest record time written, s (the 8-byte microsecond field holds up to 1.8e13 s)."""
 _CHUNK_BYTES = 1 << 20
 _BYTES_LIKE = (bytes, bytearray, memoryview)
 _V2_OVERHEAD = HEADER_LEN_V2 + CRC_LEN
@@ -364,7 +367,11 @@ class TlogWriter:
         fh = self._fh
         if fh is None:
             raise ValueError("TlogWriter is closed")
-        fh.write(self._stamp(t_s) + self._frame(msg_or_bytes))
+        # the live recorder's path (once per message): _stamp and _frame inlined for bytes
+        if not (0.0 <= t_s < _MAX_T_S):
+            raise ValueError(f"tlog timestamp must be finite and >= 0, got {t_s!r}")
+        frame = msg_or_bytes if type(msg_or_bytes) is bytes else self._frame(msg_or_bytes)
+        fh.write(_TS_PACK(int(round(t_s * US_PER_S))) + frame)
         self.records += 1
 
     def write_frames(self, t_s: float, frames: list[bytes]) -> None:
@@ -386,9 +393,9 @@ class TlogWriter:
     @staticmethod
     def _stamp(t_s: float) -> bytes:
         """The 8-byte record time of ``t_s`` (s); ValueError when negative or not finite."""
-        if not (t_s >= 0.0 and t_s < 1.8e13):
+        if not (0.0 <= t_s < _MAX_T_S):
             raise ValueError(f"tlog timestamp must be finite and >= 0, got {t_s!r}")
-        return _TS.pack(int(round(t_s * US_PER_S)))
+        return _TS_PACK(int(round(t_s * US_PER_S)))
 
     def _frame(self, msg_or_bytes: Any) -> bytes:
         """The frame's bytes: as given, or of a message (packed now if it never was)."""
