@@ -50,7 +50,7 @@ from companion.nav.heading.attitude import RATE_BASELINE_S, yaw_rate_radps
 from companion.nav.heading.config import TRACK_SOURCES, HeadingConfig
 from companion.nav.heading.corrector import HeadingCorrector
 from companion.nav.heading.criteria import Verdict
-from companion.nav.heading.state import STATE_VERSION, HeadingPhase
+from companion.nav.heading.state import STATE_VERSION, HeadingPhase, HeadingStatus
 from companion.nav.heading.stats import HeadingEstimate, RunningStats
 
 __all__ = [
@@ -61,6 +61,7 @@ __all__ = [
     "HeadingCorrector",
     "HeadingEstimate",
     "HeadingPhase",
+    "HeadingStatus",
     "RunningStats",
     "Verdict",
     "yaw_rate_radps",
