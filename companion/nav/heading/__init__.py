@@ -12,9 +12,11 @@ antenna/IMU installation offset) is an airframe constant. Unless it is given as
 heading is then the track direction, not the fuselage axis.
 
 When all acceptance criteria hold: ``CMP HDG_READY <value> ±<eps> n=<cycles>``;
-the correction is applied on confirmation (:meth:`HeadingCorrector.apply`) or
-automatically (``auto_apply``), announced with ``HDG_APPLIED``. When one fails:
-``CMP HDG_REJECT <reason>`` and the accumulation starts over.
+the correction is applied on confirmation (:meth:`HeadingCorrector.on_command`) or
+automatically (``auto_apply``), announced with ``HDG_APPLIED``, and may be undone
+(``HDG_UNDONE``: READY again). When one fails: ``CMP HDG_REJECT <reason>`` and the
+accumulation starts over. Its state for a ground station is
+:class:`HeadingStatus` (``CMP_HDGS``).
 
 Accuracy: with the Doppler track the cycles needed for ``eps`` grow as
 ``(1.96 vel_noise / (speed eps))^2`` (``bench/heading.py`` measures it);

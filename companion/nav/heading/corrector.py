@@ -74,8 +74,10 @@ class HeadingCorrector:
     at least ``publish_period_s`` since the last publication yields
     ``NamedValue("CMP_HDGC", deg)`` (accumulating: the running mean; READY: the
     candidate; APPLIED: the applied correction) and ``NamedValue("CMP_HDGE", deg)``
-    (its 95 % accuracy ``eps``), once there are two cycles. Alerts: HDG_READY,
-    HDG_REJECT, HDG_APPLIED (:class:`~companion.types.Alert`).
+    (its 95 % accuracy ``eps``), once there are two cycles. Alerts (one on each change
+    of :attr:`status`): HDG_ACCUM, HDG_READY, HDG_APPLIED, HDG_UNDONE, HDG_REJECT,
+    HDG_IDLE (:class:`~companion.types.Alert`); commands are answered by
+    :meth:`on_command`.
 
     References
     ----------
