@@ -150,7 +150,7 @@ class Pipeline:
         for sample in samples:
             kind = type(sample)
             if kind is HeadingCommand:
-                command = self.decoder.take_command()
+                command = self.decoder.take_command()  # left with every HeadingCommand
                 if command is not None:
                     frames += self._answer(command, sample, t_rx_s)  # type: ignore[arg-type]
                 continue
@@ -247,7 +247,7 @@ class Pipeline:
         command must be answered whatever happens: an error is FAILED, logged, not raised."""
         try:
             outputs = self.engine.handle(sample)
-        except Exception:  # noqa: BLE001 -- answered FAILED; the service carries on
+        except Exception:  # answered FAILED: the service carries on
             log.exception("heading command %s failed", sample.action.value)
             return CommandOutcome.FAILED, "failed: internal error (see log)", []
         results = [o for o in outputs if isinstance(o, CommandResult)]

@@ -191,6 +191,7 @@ def test_every_heading_command_case_gets_exactly_one_ack(taxi, accumulating_at, 
         (2, {"confirmation": 1}, A, [], HeadingStatus.READY),  # its retransmission
         (2, {"confirmation": 2}, A, [], HeadingStatus.READY),  # and another
         (2, {}, D, ["HDG_CMD"], HeadingStatus.READY),  # a new undo: nothing applied
+        (2, {"confirmation": 1}, D, ["HDG_CMD"], HeadingStatus.READY),  # and its retransmission
         (1, {}, A, ["HDG_APPLIED"], HeadingStatus.APPLIED),  # confirm again, announced
         (2, {"kind": "int"}, A, ["HDG_UNDONE"], HeadingStatus.READY),  # undo again
         (0, {}, A, ["HDG_REJECT"], HeadingStatus.REJECTED),  # refuse when ready

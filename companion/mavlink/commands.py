@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from companion.mavlink.ids import MAVLINK_MSG_ID_COMMAND_INT
+from companion.mavlink.ids import MAV_RESULT_ACCEPTED, MAVLINK_MSG_ID_COMMAND_INT
 from companion.types import HeadingAction
 
 HEADING_ACTIONS: dict[float, HeadingAction] = {
@@ -28,8 +28,8 @@ HEADING_ACTIONS: dict[float, HeadingAction] = {
 """``param1`` of the heading command (MAV_CMD_USER_1) -> what it asks."""
 
 RETRANSMISSION_WINDOW_S = 10.0
-"""A COMMAND_LONG with ``confirmation`` > 0 repeating the last command of the same sender
-received within this (receive time, s) is a retransmission: its ACK was lost."""
+"""A COMMAND_LONG with ``confirmation`` > 0 repeating the last command of the same sender,
+accepted within this (receive time, s), is a retransmission: its ACK was lost."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,12 +127,14 @@ def _same(a: CommandRequest, b: CommandRequest) -> bool:
 
 
 class Retransmissions:
-    """The last answer to each sender (system, component), to repeat to a retransmission.
+    """Each sender's (system, component) last command if it was ACCEPTED, to answer its
+    retransmission.
 
     A COMMAND_LONG with ``confirmation`` > 0, the same command and parameters as the
-    sender's last one and received within :data:`RETRANSMISSION_WINDOW_S` of it, is that
-    command again (its ACK was lost): it gets the same result and is not carried out a
-    second time (undo twice would otherwise be DENIED the second time).
+    sender's last one, ACCEPTED within :data:`RETRANSMISSION_WINDOW_S` before, is that
+    command again (its ACK was lost): ACCEPTED again and not carried out a second time
+    (undo twice would otherwise be DENIED the second time). A command not accepted
+    changed nothing: carried out again, it gets the answer of the moment.
     """
 
     def __init__(self, window_s: float = RETRANSMISSION_WINDOW_S) -> None:
@@ -155,9 +157,10 @@ class Retransmissions:
         return result
 
     def remember(self, request: CommandRequest, result: int, t_rx_s: float) -> None:
-        """``request`` was answered ``result`` (a MAV_RESULT) at receive time ``t_rx_s``."""
-        self._last[(request.source_system, request.source_component)] = (
-            request,
-            result,
-            t_rx_s,
-        )
+        """``request`` was answered ``result`` (a MAV_RESULT) at receive time ``t_rx_s``:
+        kept if ACCEPTED, else the sender's last command is forgotten."""
+        sender = (request.source_system, request.source_component)
+        if result == MAV_RESULT_ACCEPTED:
+            self._last[sender] = (request, result, t_rx_s)
+        else:
+            self._last.pop(sender, None)
