@@ -383,6 +383,7 @@ class Engine:
         log.info("heading correction restored: %s", text)
         if self.heading.status is HeadingStatus.IDLE:
             return []
+        self.stats.alerts[AlertCode.HDG_RESTORED.value] += 1
         return [Alert(t_s, AlertCode.HDG_RESTORED, Severity.NOTICE, text)]
 
     # ------------------------------------------------------------------ publication
