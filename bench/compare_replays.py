@@ -2,6 +2,7 @@
 
     python bench/compare_replays.py --replay OUT_DIR      # replay every fixture into OUT_DIR
     python bench/compare_replays.py REF_DIR NEW_DIR       # compare two such directories
+    python bench/compare_replays.py REF_DIR NEW_DIR --added NAMED_VALUE_FLOAT:CMP_HDGS
 
 ``--replay`` runs ``companion.replay.replay`` on each ``sitl_fixtures/*.tlog``
 (``approach_rtk20`` with ``sitl_fixtures/tactical.toml``, as its README says),
@@ -23,9 +24,10 @@ resolution MAVLink gives it:
 
 Anything else is a failure. Prints a table; exits 1 on any failure.
 
-``--new-text PREFIX`` (repeatable) declares an intended new alert: STATUSTEXT records
-of NEW whose text starts with PREFIX are listed (time, text) and left out before the
-comparison, so that what remains must agree with REF as above.
+``--added TYPE[:PREFIX]`` (repeatable) names messages the new code adds on purpose
+(a new status value, a new alert): those of the new replay, of that type and whose
+text field (NAMED_VALUE_FLOAT's name, STATUSTEXT's text) starts with PREFIX, are
+counted and left out before the comparison, so that the rest must still agree.
 """
 
 from __future__ import annotations
@@ -120,28 +122,33 @@ def _compare_values(a: Any, b: Any, stats: Counter[str]) -> bool:
     return bool(a == b)
 
 
-def _is_new_text(msg: Any, prefixes: tuple[str, ...]) -> bool:
-    """A STATUSTEXT whose text starts with one of ``prefixes`` (an intended new alert)."""
-    return bool(prefixes) and msg.get_type() == "STATUSTEXT" and msg.text.startswith(prefixes)
+def _is_added(msg: Any, added: tuple[str, ...]) -> bool:
+    """``msg`` matches one of the ``TYPE[:PREFIX]`` patterns of ``--added``."""
+    for pattern in added:
+        kind, _, prefix = pattern.partition(":")
+        if msg.get_type() != kind:
+            continue
+        fields = msg.to_dict().items()
+        texts = [v for k, v in fields if isinstance(v, str) and k not in _SKIP_FIELDS]
+        if not prefix or any(t.startswith(prefix) for t in texts):
+            return True
+    return False
 
 
 def compare_file(
-    ref: Path, new: Path, new_texts: tuple[str, ...] = ()
+    ref: Path, new: Path, added: tuple[str, ...] = ()
 ) -> tuple[str, Counter[str], list[str]]:
     """Verdict (``identical``, ``agrees`` or ``DIFFERS``), counts and the first problems;
-    STATUSTEXT records of ``new`` starting with one of ``new_texts`` are left out (listed
-    among the problems' lines with a ``+`` and counted as ``new_texts``)."""
+    messages of ``new`` matching ``added`` are counted (``added``) and left out."""
     if ref.read_bytes() == new.read_bytes():
         return "identical", Counter(), []
     stats: Counter[str] = Counter()
     problems: list[str] = []
-    declared: list[str] = []
     a_recs, b_recs = _records(ref), _records(new)
-    if new_texts:
-        added = [(t, m) for t, m in b_recs if _is_new_text(m, new_texts)]
-        b_recs = [(t, m) for t, m in b_recs if not _is_new_text(m, new_texts)]
-        stats["new_texts"] = len(added)
-        declared = [f"+ STATUSTEXT@{t:.6f} {m.text!r} (declared new)" for t, m in added]
+    if added:
+        kept = [(t, m) for t, m in b_recs if not _is_added(m, added)]
+        stats["added"] = len(b_recs) - len(kept)
+        b_recs = kept
     if len(a_recs) != len(b_recs):
         problems.append(f"message count {len(a_recs)} vs {len(b_recs)}")
     for i, ((ta, ma), (tb, mb)) in enumerate(zip(a_recs, b_recs, strict=False)):
@@ -161,7 +168,7 @@ def compare_file(
                 if len(problems) < 10:
                     problems.append(f"record {i} {ma.get_type()}.{key}: {va!r} vs {db.get(key)!r}")
     ok = not problems and stats["fields_failing"] == 0
-    return ("agrees" if ok else "DIFFERS"), stats, declared + problems
+    return ("agrees" if ok else "DIFFERS"), stats, problems
 
 
 def main() -> int:
@@ -169,11 +176,11 @@ def main() -> int:
     parser.add_argument("dirs", nargs="*", type=Path, help="REF_DIR NEW_DIR")
     parser.add_argument("--replay", type=Path, help="replay every fixture into this directory")
     parser.add_argument(
-        "--new-text",
+        "--added",
         action="append",
         default=[],
-        metavar="PREFIX",
-        help="an intended new STATUSTEXT (text prefix, e.g. 'CMP RTK_BACK'): left out of NEW",
+        metavar="TYPE[:PREFIX]",
+        help="messages the new code adds on purpose: left out of NEW_DIR before comparing",
     )
     args = parser.parse_args()
     if args.replay is not None:
@@ -194,7 +201,7 @@ def main() -> int:
             failures += 1
             continue
         print(f"comparing {ref.name} ...", file=sys.stderr, flush=True)
-        verdict, stats, problems = compare_file(ref, new, tuple(args.new_text))
+        verdict, stats, problems = compare_file(ref, new, tuple(args.added))
         totals.update(stats)
         failures += verdict == "DIFFERS"
         print(
@@ -202,6 +209,8 @@ def main() -> int:
             f"{stats['messages_differing']:>10} {stats['int_lsb_flips']:>14} "
             f"{stats['float_within_tol']:>7} {stats['text_last_digit']:>6}"
         )
+        if stats["added"]:
+            print(f"    {stats['added']} added messages left out ({', '.join(args.added)})")
         for p in problems:
             print(f"    {p}")
     print(

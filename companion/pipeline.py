@@ -13,6 +13,12 @@ the periodic output (our HEARTBEAT at ``link.heartbeat_rate_hz``, its
 ``system_status`` from the navigation's health) with its clock: a driver asks
 :meth:`Pipeline.next_due_s` when to call :meth:`Pipeline.on_timer` next, on the
 same clock as the ``t_rx_s`` it passes (docs/replay.md).
+
+Commands (the MAVLink command protocol): every COMMAND_LONG or COMMAND_INT the
+decoder finds addressed to us is answered by exactly one COMMAND_ACK to its sender,
+a retransmission with the original's result (:mod:`companion.mavlink.commands`);
+a result other than ACCEPTED or UNSUPPORTED comes with its reason in a
+``CMP HDG_CMD`` STATUSTEXT.
 """
 
 from __future__ import annotations
@@ -25,12 +31,15 @@ from typing import Any
 
 from companion.config import Config
 from companion.engine import Engine
+from companion.mavlink.commands import DecodedCommand, Retransmissions
 from companion.mavlink.decode import Decoder
 from companion.mavlink.encode import Encoder
 from companion.mavlink.ids import (
-    MAV_CMD_USER_1,
     MAV_RESULT_ACCEPTED,
+    MAV_RESULT_DENIED,
+    MAV_RESULT_FAILED,
     MAV_RESULT_TEMPORARILY_REJECTED,
+    MAV_RESULT_UNSUPPORTED,
     MAV_STATE_ACTIVE,
     MAV_STATE_CRITICAL,
     MAV_STATE_STANDBY,
@@ -40,11 +49,14 @@ from companion.types import (
     Alert,
     AlertCode,
     AutopilotFlavour,
+    CommandOutcome,
+    CommandResult,
     HeadingCommand,
     HeartbeatSample,
     NavMode,
     Output,
     RebootEvent,
+    Severity,
 )
 
 log = logging.getLogger(__name__)
@@ -58,6 +70,17 @@ STREAM_NEEDS: dict[str, tuple[str, ...]] = {
 }
 """What the estimators need, each met by any one of its messages (ArduPilot sends
 RAW_IMU/SCALED_IMU2 and ATTITUDE, PX4 HIGHRES_IMU and ATTITUDE_QUATERNION)."""
+MAV_RESULTS: dict[CommandOutcome, int] = {
+    CommandOutcome.ACCEPTED: MAV_RESULT_ACCEPTED,
+    CommandOutcome.TEMPORARILY_REJECTED: MAV_RESULT_TEMPORARILY_REJECTED,
+    CommandOutcome.DENIED: MAV_RESULT_DENIED,
+    CommandOutcome.FAILED: MAV_RESULT_FAILED,
+}
+"""The engine's answer to a command -> COMMAND_ACK.result."""
+COMMAND_ALERTS = frozenset(
+    {AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT, AlertCode.HDG_UNDONE, AlertCode.HDG_CMD}
+)
+"""Alerts a command raises: announced whatever the STATUSTEXT rate limit (one per command)."""
 
 
 @dataclass(slots=True)
@@ -69,10 +92,22 @@ class PipelineStats:
     out_by_type: Counter[str] = field(default_factory=Counter)
     rate_warnings: int = 0
     stream_requests: int = 0
+    commands: Counter[str] = field(default_factory=Counter)
+    """COMMAND_ACKs sent, by result name (``ACCEPTED``, ``DENIED`` ...)."""
+
+
+_RESULT_NAMES = {
+    MAV_RESULT_ACCEPTED: "ACCEPTED",
+    MAV_RESULT_TEMPORARILY_REJECTED: "TEMPORARILY_REJECTED",
+    MAV_RESULT_DENIED: "DENIED",
+    MAV_RESULT_UNSUPPORTED: "UNSUPPORTED",
+    MAV_RESULT_FAILED: "FAILED",
+}
 
 
 class Pipeline:
-    """Decoder -> engine -> encoder, plus stream requests and the periodic HEARTBEAT."""
+    """Decoder -> engine -> encoder, plus stream requests, command answers and the
+    periodic HEARTBEAT."""
 
     def __init__(self, config: Config | None = None) -> None:
         self.config = config or Config()
@@ -98,6 +133,8 @@ class Pipeline:
         self._heartbeat_period_s = 1.0 / self.config.link.heartbeat_rate_hz
         self._next_heartbeat_s = -math.inf
         """When our next HEARTBEAT is due (driver clock, s): at once before the first."""
+        self.retransmissions = Retransmissions()
+        """The last answer to each command sender (a lost ACK's command comes again)."""
 
     # ------------------------------------------------------------------ in
 
@@ -106,11 +143,17 @@ class Pipeline:
         self.stats.messages_in += 1
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
-            return []
+            command = self.decoder.take_command()
+            return [] if command is None else self._answer(command, None, t_rx_s)
         frames: list[bytes] = []
         handle = self.engine.handle
         for sample in samples:
             kind = type(sample)
+            if kind is HeadingCommand:
+                command = self.decoder.take_command()  # left with every HeadingCommand
+                if command is not None:
+                    frames += self._answer(command, sample, t_rx_s)  # type: ignore[arg-type]
+                continue
             if kind is HeartbeatSample:
                 frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
             elif kind is RebootEvent:
@@ -121,8 +164,6 @@ class Pipeline:
             if outputs:
                 for out in outputs:
                     frames += self._encode(out)
-            if kind is HeadingCommand:
-                frames += self._acknowledge(msg, sample, outputs)  # type: ignore[arg-type]
         next_check_s = self._next_rate_check_s
         if next_check_s is None or samples[-1].t_s >= next_check_s:
             frames += self._check_rates(samples[-1].t_s)
@@ -168,16 +209,64 @@ class Pipeline:
         """The autopilot family (decides GPS_INPUT vs GLOBAL_POSITION_SENSOR)."""
         return self.decoder.flavour
 
-    def _acknowledge(self, msg: Any, command: HeadingCommand, outputs: list[Output]) -> list[bytes]:
-        """COMMAND_ACK to the sender: accepted when the correction was applied (or the
-        refusal taken), temporarily rejected when there was nothing ready to apply."""
-        applied = any(isinstance(o, Alert) and o.code is AlertCode.HDG_APPLIED for o in outputs)
-        ok = applied or not command.apply
-        result = MAV_RESULT_ACCEPTED if ok else MAV_RESULT_TEMPORARILY_REJECTED
+    def _answer(
+        self, command: DecodedCommand, sample: HeadingCommand | None, t_rx_s: float
+    ) -> list[bytes]:
+        """Exactly one COMMAND_ACK to the sender of a command addressed to us, after what
+        carrying it out publishes. A retransmission (:class:`Retransmissions`) gets the
+        original's result and is not carried out again; the result decoding decided
+        (``command.result``) is sent as is; otherwise the engine carries out ``sample``
+        and its :class:`~companion.types.CommandResult` is the answer. A reason (not for
+        ACCEPTED or UNSUPPORTED) goes to the operator as ``CMP HDG_CMD <reason>``."""
+        request = command.request
+        frames: list[bytes] = []
+        repeated = self.retransmissions.repeat(request, t_rx_s)
+        if repeated is not None:
+            result = repeated
+            log.info("command %d retransmitted: answered %d again", request.command, result)
+        elif command.result is not None or sample is None:
+            result = MAV_RESULT_FAILED if command.result is None else command.result
+            frames += self._command_reason(result, command.reason)
+        else:
+            outcome, reason, outputs = self._carry_out(sample)
+            for out in outputs:
+                if isinstance(out, Alert) and out.code in COMMAND_ALERTS:
+                    self.encoder.allow_next(out.code)
+                frames += self._encode(out)
+            result = MAV_RESULTS[outcome]
+            frames += self._command_reason(result, reason)
+        self.retransmissions.remember(request, result, t_rx_s)
+        self.stats.commands[_RESULT_NAMES.get(result, str(result))] += 1
         ack = self.encoder.command_ack(
-            MAV_CMD_USER_1, result, msg.get_srcSystem(), msg.get_srcComponent()
+            request.command, result, request.source_system, request.source_component
         )
-        return [self._pack(ack)]
+        return frames + [self._pack(ack)]
+
+    def _carry_out(self, sample: HeadingCommand) -> tuple[CommandOutcome, str, list[Output]]:
+        """The engine's outcome of a command, its reason and its other outputs. The
+        command must be answered whatever happens: an error is FAILED, logged, not raised."""
+        try:
+            outputs = self.engine.handle(sample)
+        except Exception:  # answered FAILED: the service carries on
+            log.exception("heading command %s failed", sample.action.value)
+            return CommandOutcome.FAILED, "failed: internal error (see log)", []
+        results = [o for o in outputs if isinstance(o, CommandResult)]
+        others: list[Output] = [o for o in outputs if not isinstance(o, CommandResult)]
+        if len(results) != 1:
+            log.error("heading command %s: %d results", sample.action.value, len(results))
+            return CommandOutcome.FAILED, "failed: no single answer", others
+        return results[0].outcome, results[0].reason, others
+
+    def _command_reason(self, result: int, reason: str) -> list[bytes]:
+        """``CMP HDG_CMD <reason>`` for a command not accepted (none without a reason)."""
+        if result in (MAV_RESULT_ACCEPTED, MAV_RESULT_UNSUPPORTED) or not reason:
+            return []
+        temporary = result == MAV_RESULT_TEMPORARILY_REJECTED
+        severity = Severity.NOTICE if temporary else Severity.WARNING
+        t_s = self.decoder.last_t_s
+        alert = Alert(0.0 if t_s is None else t_s, AlertCode.HDG_CMD, severity, reason)
+        self.encoder.allow_next(alert.code)
+        return self._encode(alert)
 
     def _encode(self, out: Output) -> list[bytes]:
         if isinstance(out, Alert):

@@ -132,6 +132,28 @@ class AlertCode(enum.Enum):
     HDG_READY = "HDG_READY"
     HDG_APPLIED = "HDG_APPLIED"
     HDG_REJECT = "HDG_REJECT"
+    HDG_ACCUM = "HDG_ACCUM"
+    HDG_IDLE = "HDG_IDLE"
+    HDG_UNDONE = "HDG_UNDONE"
+    HDG_RESTORED = "HDG_RESTORED"
+    HDG_CMD = "HDG_CMD"
+
+
+class HeadingAction(enum.Enum):
+    """What the ground station asks of the taxi heading correction (docs/mavlink.md)."""
+
+    REFUSE = "refuse"  # drop the READY candidate: the accumulation starts over
+    CONFIRM = "confirm"  # apply the READY candidate
+    UNDO = "undo"  # remove the applied correction: back to the uncorrected heading
+
+
+class CommandOutcome(enum.Enum):
+    """The engine's answer to an operator command (the pipeline sends it as COMMAND_ACK)."""
+
+    ACCEPTED = "accepted"  # done, or already so (a repeated command changes nothing)
+    TEMPORARILY_REJECTED = "temporarily_rejected"  # not now: may succeed later
+    DENIED = "denied"  # not in this state, or not a valid request: retrying will not help
+    FAILED = "failed"  # valid, but carrying it out failed
 
 
 # --------------------------------------------------------------------------- samples in
@@ -281,11 +303,11 @@ class RebootEvent:
 
 @dataclass(frozen=True, slots=True)
 class HeadingCommand:
-    """The ground station confirmed (``apply=True``) or refused the heading correction."""
+    """The ground station confirmed, refused or undid the heading correction."""
 
     t_s: float
     t_rx_s: float
-    apply: bool
+    action: HeadingAction
 
 
 Sample = (
@@ -376,4 +398,14 @@ class IntegrityReport:
     fault_detected: bool
 
 
-Output = NavSolution | Alert | NamedValue | IntegrityReport
+@dataclass(frozen=True, slots=True)
+class CommandResult:
+    """The answer to an operator command (:class:`HeadingCommand`): its outcome and, unless
+    accepted, the reason for the operator (STATUSTEXT). Exactly one per command."""
+
+    t_s: float
+    outcome: CommandOutcome
+    reason: str = ""
+
+
+Output = NavSolution | Alert | NamedValue | IntegrityReport | CommandResult

@@ -25,6 +25,8 @@ def test_console_shows_position_fix_outage_and_alerts(tmp_path):
     assert "position" in screen and "no solution" not in screen
     assert state.heartbeats > 100 and state.fix_type is not None
     assert in_outage_screen is not None and "outage" in in_outage_screen
+    # no taxi in this flight: the heading correction's state (CMP_HDGS) is idle
+    assert [line for line in screen.splitlines() if line.startswith("heading")][0].endswith("idle")
     codes = [text.split()[1] for _, _, text in state.alerts]
     assert "GNSS_LOST" in codes and "GNSS_BACK" in codes
     assert any(sev == "WARN" for _, sev, _ in state.alerts)

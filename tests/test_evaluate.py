@@ -419,6 +419,9 @@ def test_heading_correction_against_sidecar(tmp_path: Path, truth: Truth, pm: st
     assert h.applied
     assert ev.n_false_alerts == 0
     assert "HDG_READY +1.020" in ev.to_text()
+    if pm == "?":  # undone after: not applied
+        undone = run(tmp_path, truth, [*items, statustext(26.0, "CMP HDG_UNDONE 1.02")], sidecar)
+        assert not undone.heading.applied
 
 
 def test_px4_accuracy_from_named_values(tmp_path: Path, truth: Truth) -> None:

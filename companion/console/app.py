@@ -32,6 +32,7 @@ from companion.mavlink.readback import (
     from_service,
     read_message,
 )
+from companion.nav.heading import HeadingStatus
 from companion.types import NamedValue, Severity
 
 REDRAW_S = 0.5
@@ -112,6 +113,7 @@ class ConsoleState:
         )
         lines.append(
             f"heading   correction {_val(v, 'CMP_HDGC', '.2f')}° ± {_val(v, 'CMP_HDGE', '.2f')}°"
+            f"   {_heading_state(v)}"
         )
         lines += ["", "alerts:"]
         if not self.alerts:
@@ -119,6 +121,17 @@ class ConsoleState:
         for t, sev, text in reversed(self.alerts):
             lines.append(f"  {time.strftime('%H:%M:%S', time.gmtime(t))} {sev:<6} {text}")
         return "\n".join(lines)
+
+
+def _heading_state(values: dict[str, float]) -> str:
+    """``CMP_HDGS`` by name (docs/mavlink.md), ``—`` before the first."""
+    code = values.get("CMP_HDGS")
+    if code is None:
+        return "—"
+    try:
+        return HeadingStatus(int(code)).name.lower()
+    except ValueError:
+        return f"state {code:g}"
 
 
 def _val(values: dict[str, float], name: str, fmt: str = ".2f") -> str:

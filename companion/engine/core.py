@@ -47,7 +47,7 @@ from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
-from companion.nav.heading import HeadingConfig, HeadingCorrector
+from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
 from companion.nav.navigator import NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
@@ -64,6 +64,7 @@ from companion.types import (
     Output,
     RebootEvent,
     Sample,
+    Severity,
     VfrHudSample,
 )
 
@@ -72,7 +73,16 @@ log = logging.getLogger(__name__)
 OUTAGE_TICK_S = 0.05
 """Outage-clock resolution (s): GNSS_LOST is raised within this of its timeout."""
 
-_HEADING_CODES = frozenset({AlertCode.HDG_READY, AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT})
+_HEADING_CODES = frozenset(
+    {
+        AlertCode.HDG_READY,
+        AlertCode.HDG_APPLIED,
+        AlertCode.HDG_REJECT,
+        AlertCode.HDG_ACCUM,
+        AlertCode.HDG_IDLE,
+        AlertCode.HDG_UNDONE,
+    }
+)
 """Alerts that change :meth:`Engine.persistent_state`."""
 
 
@@ -150,16 +160,19 @@ class Engine:
         self._next_outage_tick_s = -math.inf
         self._yaw_rad: float | None = None
         """The autopilot's latest heading (ATTITUDE), uncorrected."""
+        self._attitude: AttitudeSample | None = None
+        """The latest attitude sample (taken again when the heading correction changes)."""
         self.heading = HeadingCorrector(self._heading_config)
 
     # ------------------------------------------------------------------ entry point
 
     def handle(self, sample: Sample) -> list[Output]:
         """Take one sample; return what to publish (possibly nothing)."""
+        if self._pending_state is not None:
+            restored = self._restore_now(sample.t_s)
+            return restored + self.handle(sample)
         kind = type(sample)
         self._sample_counts[kind] += 1
-        if self._pending_state is not None:
-            self._restore_now(sample.t_s)
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []
         t_s = sample.t_s
@@ -186,6 +199,8 @@ class Engine:
                     self.state_changes += 1
                 if out.code is AlertCode.HDG_APPLIED:
                     self._heading_applied()
+                elif out.code is AlertCode.HDG_UNDONE:
+                    self._heading_undone()
         return outputs
 
     # ------------------------------------------------------------------ handlers
@@ -197,6 +212,7 @@ class Engine:
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
+        self._attitude = sample
         if not self._airborne:  # the taxi heading correction runs before take-off
             self.heading.on_attitude(sample)
         correction_rad = self.heading.correction_rad
@@ -207,10 +223,11 @@ class Engine:
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
         state = sample.landed_state
         self._landed = state
-        if state in (LandedState.IN_AIR, LandedState.LANDING):
-            self._airborne = True
         on_ground = None if state is LandedState.UNDEFINED else state is LandedState.ON_GROUND
         self.heading.on_landed_state(on_ground)
+        if state in (LandedState.IN_AIR, LandedState.LANDING) and not self._airborne:
+            self._airborne = True
+            return self.heading.end_taxi(sample.t_s)
         return []
 
     def _on_vfr_hud(self, sample: VfrHudSample) -> list[Output]:
@@ -226,6 +243,26 @@ class Engine:
         if applied is None:
             return
         sigma_rad = max(applied.eps_rad / self._heading_config.z_score, 1e-6)
+        self._heading_changed(sigma_rad)
+
+    def _heading_undone(self) -> None:
+        """The navigators restart their heading error from the uncorrected heading, with
+        the 1-sigma the blend gives it before any correction: as if none had been applied."""
+        self._heading_changed(self._blend_config.heading_prior_sigma_rad)
+
+    def _heading_changed(self, sigma_rad: float) -> None:
+        """The correction was applied or undone: the navigators and the inertial references
+        take the latest attitude again with the correction now in force (a strapdown blend
+        restarts its heading from it), then every navigator restarts its heading error at
+        ``sigma_rad`` (1-sigma)."""
+        attitude = self._attitude
+        correction_rad = self.heading.correction_rad
+        if (
+            attitude is not None
+            and self.navigators.on_attitude(attitude, correction_rad)
+            and self.coast is not None
+        ):
+            self.coast.on_attitude(attitude, correction_rad)
         self.navigators.reset_heading(sigma_rad)
 
     def _on_reboot(self, sample: RebootEvent) -> list[Output]:
@@ -323,24 +360,31 @@ class Engine:
         autopilot boot (its clock not behind the saved time); otherwise drop it."""
         self._pending_state = state
 
-    def _restore_now(self, t_s: float) -> None:
+    def _restore_now(self, t_s: float) -> list[Output]:
+        """Restore the pending state at the first sample (time ``t_s``); a restored
+        correction (anything but IDLE) is announced: ``HDG_RESTORED <status> <value>``."""
         state, self._pending_state = self._pending_state, None
         if state is None:
-            return
+            return []
         saved_t = state.get("t_s")
         if not isinstance(saved_t, int | float) or t_s < saved_t:
             log.info("saved state is from an earlier autopilot boot: not restored")
-            return
+            return []
         heading = state.get("heading")
         if not isinstance(heading, dict):
             log.warning("saved state has no heading block: not restored")
-            return
+            return []
         try:
             self.heading = HeadingCorrector.from_state(self._heading_config, heading)
         except ValueError as exc:
             log.warning("saved heading state rejected: %s", exc)
-            return
-        log.info("heading correction restored: %.3f deg", math.degrees(self.heading.correction_rad))
+            return []
+        text = self.heading.describe()
+        log.info("heading correction restored: %s", text)
+        if self.heading.status is HeadingStatus.IDLE:
+            return []
+        self.stats.alerts[AlertCode.HDG_RESTORED.value] += 1
+        return [Alert(t_s, AlertCode.HDG_RESTORED, Severity.NOTICE, text)]
 
     # ------------------------------------------------------------------ publication
 

@@ -7,7 +7,8 @@
 * the integrity monitor's outputs for that solution (alerts, protection levels);
 * at each status tick (``EngineConfig.status_rate_hz``) the status values
   ``CMP_HACC``, ``CMP_VACC`` (1-sigma accuracies, m), ``CMP_OUTG`` (time since the last
-  fused fix, s) and the potential filter's.
+  fused fix, s), the potential filter's and ``CMP_HDGS`` (the taxi heading correction's
+  :class:`~companion.nav.heading.HeadingStatus`).
 
 The names are those of docs/mavlink.md; the publication clock itself is the engine's
 (:mod:`companion.engine.core`).
@@ -108,6 +109,7 @@ class Publisher:
                 NamedValue(t_s, "CMP_VACC", solution.v_acc_m),
                 NamedValue(t_s, "CMP_OUTG", self._outage.outage_s(t_s)),
                 *self._bridge.status_values(t_s),
+                NamedValue(t_s, "CMP_HDGS", float(heading.status)),
             ]
         return outputs
 

@@ -101,6 +101,7 @@ class HeadingResult:
     ``heading_error_deg + crab_deg`` from the sidecar (None when absent); ``error_deg`` is the
     ready value minus the expected one, wrapped; ``hdgc_error_deg`` the same for the last
     ``CMP_HDGC``. ``accumulation_s`` is from the first ``CMP_HDGC`` to ``HDG_READY``.
+    ``applied``: an ``HDG_APPLIED`` not followed by an ``HDG_UNDONE``.
     """
 
     ready_value_deg: float | None

@@ -185,6 +185,8 @@ def heading_result(
             rejects.append(rest)
         elif code == "HDG_APPLIED":
             applied = True
+        elif code == "HDG_UNDONE":
+            applied = False
     expected: float | None = None
     # at the sidecar's top level, or under "parameters" where the simulator writes them
     nested = sidecar.get("parameters")

@@ -12,7 +12,12 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.mavlink import units
 from companion.mavlink.decode import Decoder, DecoderConfig
-from companion.mavlink.ids import MAV_CMD_USER_1
+from companion.mavlink.ids import (
+    MAV_CMD_USER_1,
+    MAV_RESULT_DENIED,
+    MAV_RESULT_TEMPORARILY_REJECTED,
+    MAV_RESULT_UNSUPPORTED,
+)
 from companion.nav.rotations import euler_to_quat
 from companion.types import (
     AttitudeSample,
@@ -20,6 +25,7 @@ from companion.types import (
     AutopilotSolution,
     FixType,
     GnssFix,
+    HeadingAction,
     HeadingCommand,
     HeartbeatSample,
     ImuSample,
@@ -232,15 +238,57 @@ def test_global_position_int_from_autopilot() -> None:
 
 def test_heading_confirmation_command() -> None:
     d = ready()
-    for p1, apply in ((1.0, True), (0.0, False)):
+    actions = ((1.0, HeadingAction.CONFIRM), (0.0, HeadingAction.REFUSE), (2.0, HeadingAction.UNDO))
+    for p1, action in actions:
         m = apm.MAVLink_command_long_message(1, 191, MAV_CMD_USER_1, 0, p1, 0, 0, 0, 0, 0, 0)
         out = d.decode(GCS.parsed(m), 2.0)
-        assert out == [HeadingCommand(t_s=10.0, t_rx_s=2.0, apply=apply)]
-    bad = apm.MAVLink_command_long_message(1, 191, MAV_CMD_USER_1, 0, 0.5, 0, 0, 0, 0, 0, 0)
-    assert d.decode(GCS.parsed(bad), 2.0) == []
+        assert out == [HeadingCommand(t_s=10.0, t_rx_s=2.0, action=action)]
+        taken = d.take_command()
+        assert taken is not None and taken.result is None and taken.request.source_system == 255
+        assert d.take_command() is None  # once
+    # COMMAND_INT carries it too (x, y are integers there)
+    mi = apm.MAVLink_command_int_message(0, 191, 0, MAV_CMD_USER_1, 0, 0, 1.0, 0, 0, 0, 0, 0, 0)
+    assert d.decode(GCS.parsed(mi), 2.0) == [
+        HeadingCommand(t_s=10.0, t_rx_s=2.0, action=HeadingAction.CONFIRM)
+    ]
+    taken = d.take_command()
+    assert taken is not None and taken.request.message == "COMMAND_INT"
+    for p1 in (0.5, 3.0, -1.0, float("nan")):
+        bad = apm.MAVLink_command_long_message(1, 191, MAV_CMD_USER_1, 0, p1, 0, 0, 0, 0, 0, 0)
+        assert d.decode(GCS.parsed(bad), 2.0) == []
+        taken = d.take_command()
+        assert taken is not None and taken.result == MAV_RESULT_DENIED and "param1" in taken.reason
     other = apm.MAVLink_command_long_message(1, 1, MAV_CMD_USER_1, 0, 1.0, 0, 0, 0, 0, 0, 0)
-    assert d.decode(GCS.parsed(other), 2.0) == []
-    assert d.rejections["bad_command_param"] == 1 and d.rejections["not_for_us"] == 1
+    assert d.decode(GCS.parsed(other), 2.0) == [] and d.take_command() is None
+    assert d.rejections["bad_command_param"] == 4 and d.rejections["not_for_us"] == 1
+    assert d.accepted["COMMAND_LONG"] == 3 and d.accepted["COMMAND_INT"] == 1
+
+
+def test_other_commands_addressed_to_us_are_unsupported_broadcasts_are_not_ours() -> None:
+    d = ready()
+    for kind in ("long", "int"):
+        for target, answered in ((191, True), (0, False), (1, False)):
+            if kind == "long":
+                m = apm.MAVLink_command_long_message(1, target, 512, 0, 33, 0, 0, 0, 0, 0, 0)
+            else:
+                m = apm.MAVLink_command_int_message(1, target, 0, 512, 0, 0, 33, 0, 0, 0, 0, 0, 0)
+            assert d.decode(GCS.parsed(m), 2.0) == []
+            taken = d.take_command()
+            if answered:
+                assert taken is not None and taken.result == MAV_RESULT_UNSUPPORTED
+                assert taken.request.command == 512
+            else:
+                assert taken is None
+    assert d.rejections["unsupported_command"] == 2 and d.rejections["unhandled_type"] == 4
+
+
+def test_heading_command_before_the_clock_is_temporarily_rejected() -> None:
+    d = Decoder()
+    m = apm.MAVLink_command_long_message(0, 191, MAV_CMD_USER_1, 0, 1.0, 0, 0, 0, 0, 0, 0)
+    assert d.decode(GCS.parsed(m), 2.0) == []
+    taken = d.take_command()
+    assert taken is not None and taken.result == MAV_RESULT_TEMPORARILY_REJECTED
+    assert d.rejections["no_time_yet"] == 1
 
 
 # ------------------------------------------------------------------ identity filters

@@ -31,6 +31,7 @@ from companion.types import (
     AttitudeSample,
     FixType,
     GnssFix,
+    HeadingAction,
     HeadingCommand,
     NamedValue,
     Output,
@@ -152,7 +153,8 @@ def run(corrector: HeadingCorrector, stream: TaxiStream, *, confirm: bool = Fals
             got = corrector.on_gnss(s)
             out.extend(got)
             if confirm and any(isinstance(o, Alert) and o.code is AlertCode.HDG_READY for o in got):
-                out.extend(corrector.on_command(HeadingCommand(s.t_s, s.t_rx_s, True)))
+                confirm_cmd = HeadingCommand(s.t_s, s.t_rx_s, HeadingAction.CONFIRM)
+                out.extend(corrector.on_command(confirm_cmd))
     return out
 
 
@@ -543,7 +545,7 @@ def test_auto_apply_and_refusal() -> None:
     hc2 = HeadingCorrector()
     out2 = run(hc2, taxi_stream(square_taxi()[:3], seed=13))
     assert alerts(out2, AlertCode.HDG_READY)
-    got = hc2.on_command(HeadingCommand(200.0, 200.0, False))
+    got = hc2.on_command(HeadingCommand(200.0, 200.0, HeadingAction.REFUSE))
     assert alerts(got, AlertCode.HDG_REJECT)[0].text == "refused"
     assert hc2.phase is HeadingPhase.ACCUMULATING and hc2.estimate().n == 0
     assert hc2.correction_rad == 0.0

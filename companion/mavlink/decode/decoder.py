@@ -9,12 +9,18 @@ checks every message passes:
   HEARTBEAT) every other message is rejected ``no_system_yet``; afterwards
   messages of other systems are rejected ``wrong_sysid`` (except the heading
   command);
-* COMMAND_LONG ``MAV_CMD_USER_1`` (31010) addressed to our system (or
-  broadcast) and to component 191 (or broadcast), from anyone, is the
-  **heading-confirmation command**: ``param1 == 1`` ->
-  ``HeadingCommand(apply=True)``, ``param1 == 0`` -> ``HeadingCommand(apply=False)``;
-  any other value is rejected (``bad_command_param``), a command for another
-  component ``not_for_us``.
+* COMMAND_LONG or COMMAND_INT ``MAV_CMD_USER_1`` (31010) addressed to our system
+  (or broadcast) and to component 191 (or broadcast), from anyone, is the
+  **heading command**: ``param1`` 1 -> ``HeadingCommand(CONFIRM)``, 0 -> ``REFUSE``,
+  2 -> ``UNDO``; any other value is rejected (``bad_command_param``), a heading
+  command for another component ``not_for_us``. Any other command addressed to
+  component 191 itself is rejected ``unsupported_command``; broadcast or addressed
+  elsewhere it is ``unhandled_type``.
+
+Every command addressed to us leaves a :class:`~companion.mavlink.commands.DecodedCommand`
+for the caller to answer (:meth:`Decoder.take_command`): with its result when decoding
+decided it (UNSUPPORTED, DENIED for a bad ``param1``, TEMPORARILY_REJECTED before the
+autopilot's clock is known).
 
 A message whose fields cannot be read is ``corrupt_frame``; a rejected message
 yields no sample, and exactly one counter (``accepted`` or ``rejections``)
@@ -27,6 +33,12 @@ import collections
 from collections.abc import Callable
 from typing import Any
 
+from companion.mavlink.commands import (
+    DecodedCommand,
+    addressed_to,
+    heading_action,
+    read_command,
+)
 from companion.mavlink.decode.clock import BootClock
 from companion.mavlink.decode.config import DecoderConfig
 from companion.mavlink.decode.gnss import GnssDecoder
@@ -35,8 +47,12 @@ from companion.mavlink.decode.rejections import Rejected, count_rejection
 from companion.mavlink.decode.vehicle import VehicleDecoder
 from companion.mavlink.ids import (
     MAV_CMD_USER_1,
+    MAV_RESULT_DENIED,
+    MAV_RESULT_TEMPORARILY_REJECTED,
+    MAV_RESULT_UNSUPPORTED,
     MAVLINK_MSG_ID_ATTITUDE,
     MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+    MAVLINK_MSG_ID_COMMAND_INT,
     MAVLINK_MSG_ID_COMMAND_LONG,
     MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
     MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
@@ -107,6 +123,7 @@ class Decoder:
         gnss = GnssDecoder(c, clock)
         inertial = InertialDecoder(c, clock)
         self._own_comp = c.own_component
+        self._pending_command: DecodedCommand | None = None
         self._handlers: dict[int, Callable[[Any, float], Sample | None]] = {
             MAVLINK_MSG_ID_SYSTEM_TIME: clock.system_time,
             MAVLINK_MSG_ID_GPS_RAW_INT: gnss.gps_raw,
@@ -216,6 +233,12 @@ class Decoder:
             return out
         return [sample] if sample is not None else []
 
+    def take_command(self) -> DecodedCommand | None:
+        """The command addressed to us that the last :meth:`decode` read, once: the caller
+        answers it with exactly one COMMAND_ACK. ``None`` when there is none."""
+        command, self._pending_command = self._pending_command, None
+        return command
+
     def bad_frame(self, count: int = 1) -> None:
         """Count ``count`` corrupt frames reported by the parser (reason ``corrupt_frame``)."""
         if count > 0:
@@ -226,7 +249,7 @@ class Decoder:
     def _unhandled(
         self, msg: Any, msg_id: int, src_sys: int, src_comp: int, t_rx_s: float
     ) -> list[Sample]:
-        """Messages without a sample handler: BAD_DATA, HEARTBEAT, COMMAND_LONG, the rest."""
+        """Messages without a sample handler: BAD_DATA, HEARTBEAT, commands, the rest."""
         if msg_id < 0:
             self._reject("corrupt_frame")
             return []
@@ -241,36 +264,46 @@ class Decoder:
                 return []
             self.accepted["HEARTBEAT"] += 1
             return [heartbeat]
-        if msg_id == MAVLINK_MSG_ID_COMMAND_LONG:
-            return self._command_long(msg, t_rx_s)
+        if msg_id == MAVLINK_MSG_ID_COMMAND_LONG or msg_id == MAVLINK_MSG_ID_COMMAND_INT:
+            return self._command(msg, t_rx_s)
         self._reject("unhandled_type")
         return []
 
-    def _command_long(self, msg: Any, t_rx_s: float) -> list[Sample]:
-        """The heading-confirmation command, if ``msg`` is one addressed to us."""
-        if msg.command != MAV_CMD_USER_1:
-            self._reject("unhandled_type")
+    def _command(self, msg: Any, t_rx_s: float) -> list[Sample]:
+        """A COMMAND_LONG or COMMAND_INT: the heading command if it is one addressed to us;
+        any command addressed to us is left for :meth:`take_command`."""
+        try:
+            request = read_command(msg)
+        except (AttributeError, TypeError, ValueError, OverflowError):
+            self._reject("corrupt_frame")
             return []
-        if msg.target_system not in (0, self._vehicle.system_id) or msg.target_component not in (
-            0,
-            self._own_comp,
-        ):
+        ours = addressed_to(request, self._vehicle.system_id, self._own_comp)
+        if request.command != MAV_CMD_USER_1:
+            if ours and request.target_component == self._own_comp:
+                self._reject("unsupported_command")
+                self._pending_command = DecodedCommand(request, MAV_RESULT_UNSUPPORTED)
+            else:  # a broadcast is answered by the components that implement it
+                self._reject("unhandled_type")
+            return []
+        if not ours:
             self._reject("not_for_us")
             return []
-        p1 = msg.param1
-        if p1 == 1.0:
-            apply = True
-        elif p1 == 0.0:
-            apply = False
-        else:
+        p1 = request.params[0]
+        action = heading_action(p1)
+        if action is None:
             self._reject("bad_command_param")
+            reason = f"param1 {p1:.4g}: 0 refuse, 1 confirm, 2 undo"
+            self._pending_command = DecodedCommand(request, MAV_RESULT_DENIED, reason)
             return []
         t_s = self._clock.last_t_s
         if t_s is None:
             self._reject("no_time_yet")
+            reason = "no autopilot clock yet"
+            self._pending_command = DecodedCommand(request, MAV_RESULT_TEMPORARILY_REJECTED, reason)
             return []
-        self.accepted["COMMAND_LONG"] += 1
-        return [HeadingCommand(t_s=t_s, t_rx_s=t_rx_s, apply=apply)]
+        self.accepted[request.message] += 1
+        self._pending_command = DecodedCommand(request)
+        return [HeadingCommand(t_s=t_s, t_rx_s=t_rx_s, action=action)]
 
     def _take_pending(self) -> list[Sample]:
         """A RebootEvent found before a message was rejected is still reported."""

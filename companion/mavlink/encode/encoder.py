@@ -155,7 +155,8 @@ class Encoder:
         Raises
         ------
         ValueError
-            If ``out`` is not an output type.
+            If ``out`` is not an output type (a CommandResult is the pipeline's to answer:
+            it knows the sender).
         """
         if isinstance(out, NavSolution):
             return self._solution(out, flavour)
@@ -185,6 +186,11 @@ class Encoder:
         return self._mod.MAVLink_command_ack_message(
             command, result, 0, 0, target_system, target_component
         )
+
+    def allow_next(self, code: AlertCode) -> None:
+        """Let the next STATUSTEXT of ``code`` through whatever the rate limit: it answers
+        an operator's command (one per command, not the flood the limit is for)."""
+        self._last_alert_t.pop(code, None)
 
     def pack(self, msg: Any) -> bytes:
         """Serialise ``msg`` with our system id, component 191 and the next sequence number,

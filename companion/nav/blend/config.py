@@ -101,6 +101,13 @@ class BlendConfig:
                 f"got {self.history_s}"
             )
 
+    @property
+    def heading_prior_sigma_rad(self) -> float:
+        """The 1-sigma the blend gives the autopilot's heading error before any taxi
+        correction (the attitude error about down its mode starts from), rad."""
+        sigma = self.init_att_sigma_rad if self.mode == "strapdown" else self.att_err_sigma_rad
+        return float(sigma[2])
+
     @classmethod
     def for_grade(cls, grade: str, **overrides: object) -> BlendConfig:
         """Noise densities of an IMU grade from :data:`companion.nav.grades.IMU_GRADES`:

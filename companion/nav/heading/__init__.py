@@ -12,9 +12,11 @@ antenna/IMU installation offset) is an airframe constant. Unless it is given as
 heading is then the track direction, not the fuselage axis.
 
 When all acceptance criteria hold: ``CMP HDG_READY <value> ±<eps> n=<cycles>``;
-the correction is applied on confirmation (:meth:`HeadingCorrector.apply`) or
-automatically (``auto_apply``), announced with ``HDG_APPLIED``. When one fails:
-``CMP HDG_REJECT <reason>`` and the accumulation starts over.
+the correction is applied on confirmation (:meth:`HeadingCorrector.on_command`) or
+automatically (``auto_apply``), announced with ``HDG_APPLIED``, and may be undone
+(``HDG_UNDONE``: READY again). When one fails: ``CMP HDG_REJECT <reason>`` and the
+accumulation starts over. Its state for a ground station is
+:class:`HeadingStatus` (``CMP_HDGS``).
 
 Accuracy: with the Doppler track the cycles needed for ``eps`` grow as
 ``(1.96 vel_noise / (speed eps))^2`` (``bench/heading.py`` measures it);
@@ -50,7 +52,7 @@ from companion.nav.heading.attitude import RATE_BASELINE_S, yaw_rate_radps
 from companion.nav.heading.config import TRACK_SOURCES, HeadingConfig
 from companion.nav.heading.corrector import HeadingCorrector
 from companion.nav.heading.criteria import Verdict
-from companion.nav.heading.state import STATE_VERSION, HeadingPhase
+from companion.nav.heading.state import STATE_VERSION, HeadingPhase, HeadingStatus
 from companion.nav.heading.stats import HeadingEstimate, RunningStats
 
 __all__ = [
@@ -61,6 +63,7 @@ __all__ = [
     "HeadingCorrector",
     "HeadingEstimate",
     "HeadingPhase",
+    "HeadingStatus",
     "RunningStats",
     "Verdict",
     "yaw_rate_radps",

@@ -12,7 +12,16 @@ once the sample is sufficient the acceptance criteria
 Phases (:class:`~companion.nav.heading.state.HeadingPhase`): ACCUMULATING ->
 READY (all criteria hold) -> APPLIED (confirmed, or ``auto_apply``). A failed
 criterion, or a position-track sample losing RTK, starts the accumulation over;
-the ground station's refusal sends READY back to ACCUMULATING.
+the ground station's refusal sends READY back to ACCUMULATING, its undo APPLIED
+back to READY (the same candidate, which it may confirm again or refuse). At
+take-off an unfinished accumulation is dropped.
+
+What a ground station sees (:class:`~companion.nav.heading.state.HeadingStatus`,
+:attr:`HeadingCorrector.status`): IDLE, ACCUMULATING, READY, APPLIED or REJECTED
+(after a failed criterion or a refusal, until the next cycle counts). Every change
+is announced by an alert (HDG_ACCUM, HDG_READY, HDG_APPLIED, HDG_REJECT,
+HDG_UNDONE, HDG_IDLE), and every command (:meth:`HeadingCorrector.on_command`) is
+answered by exactly one :class:`~companion.types.CommandResult`.
 
 Pure: no I/O, no clock; time comes from the samples.
 """
@@ -31,7 +40,7 @@ from companion.nav.heading.config import HeadingConfig
 from companion.nav.heading.criteria import Verdict, judge_sample
 from companion.nav.heading.ground import GroundState
 from companion.nav.heading.park import ParkCheck
-from companion.nav.heading.state import HeadingPhase, restore_state, to_state
+from companion.nav.heading.state import HeadingPhase, HeadingStatus, restore_state, to_state
 from companion.nav.heading.stats import CycleSample, HeadingEstimate
 from companion.nav.heading.track import PositionTrack
 from companion.nav.rotations import wrap_pi
@@ -39,7 +48,10 @@ from companion.types import (
     Alert,
     AlertCode,
     AttitudeSample,
+    CommandOutcome,
+    CommandResult,
     GnssFix,
+    HeadingAction,
     HeadingCommand,
     NamedValue,
     Output,
@@ -62,8 +74,10 @@ class HeadingCorrector:
     at least ``publish_period_s`` since the last publication yields
     ``NamedValue("CMP_HDGC", deg)`` (accumulating: the running mean; READY: the
     candidate; APPLIED: the applied correction) and ``NamedValue("CMP_HDGE", deg)``
-    (its 95 % accuracy ``eps``), once there are two cycles. Alerts: HDG_READY,
-    HDG_REJECT, HDG_APPLIED (:class:`~companion.types.Alert`).
+    (its 95 % accuracy ``eps``), once there are two cycles. Alerts (one on each change
+    of :attr:`status`): HDG_ACCUM, HDG_READY, HDG_APPLIED, HDG_UNDONE, HDG_REJECT,
+    HDG_IDLE (:class:`~companion.types.Alert`); commands are answered by
+    :meth:`on_command`.
 
     References
     ----------
@@ -94,6 +108,9 @@ class HeadingCorrector:
         self._last_fix_t: float | None = None
         self._source: str | None = None
         """Track source of the current sample ("position" / "velocity"; None: not chosen)."""
+        self._rejected = False
+        """The last sample was rejected (criterion, parked check or refusal) and no cycle
+        has counted since: :attr:`status` REJECTED."""
 
     # ------------------------------------------------------------------ inputs
 
@@ -111,16 +128,50 @@ class HeadingCorrector:
             self._ground.climb_mps = sample.climb_mps
 
     def on_command(self, command: HeadingCommand) -> list[Output]:
-        """The ground station's answer: apply, or refuse (the sample is restarted)."""
-        if command.apply:
-            return self.apply(command.t_s)
-        if self.phase is HeadingPhase.READY:
-            logger.info("heading correction refused by the ground station")
-            self._restart()
-            self.reject_alerts += 1
-            return [Alert(command.t_s, AlertCode.HDG_REJECT, Severity.WARNING, "refused")]
-        self._reject("command_refuse_not_ready")
-        return []
+        """The ground station's command: its alerts, then exactly one
+        :class:`~companion.types.CommandResult`. Repeating a command that succeeded
+        changes nothing and is accepted again, except undo (nothing is applied then).
+
+        ============  ======================  =====================  ======================
+        status        confirm                 refuse                 undo
+        ============  ======================  =====================  ======================
+        READY         ACCEPTED, applied       ACCEPTED, restarted    DENIED
+        APPLIED       ACCEPTED (no change)    DENIED (undo it)       ACCEPTED, READY again
+        other         TEMPORARILY_REJECTED    ACCEPTED (no change)   DENIED
+        ============  ======================  =====================  ======================
+        """
+        t_s = command.t_s
+        action = command.action
+        phase = self.phase
+        status = self.status.name.lower()
+        if action is HeadingAction.CONFIRM:
+            if phase is HeadingPhase.APPLIED:
+                return [CommandResult(t_s, CommandOutcome.ACCEPTED)]
+            out = self.apply(t_s)
+            if self.phase is HeadingPhase.APPLIED:
+                return [*out, CommandResult(t_s, CommandOutcome.ACCEPTED)]
+            reason = f"confirm: none ready ({status})"
+            return [CommandResult(t_s, CommandOutcome.TEMPORARILY_REJECTED, reason)]
+        if action is HeadingAction.REFUSE:
+            if phase is HeadingPhase.READY:
+                logger.info("heading correction refused by the ground station")
+                self._restart()
+                self._rejected = True
+                self.reject_alerts += 1
+                return [
+                    Alert(t_s, AlertCode.HDG_REJECT, Severity.WARNING, "refused"),
+                    CommandResult(t_s, CommandOutcome.ACCEPTED),
+                ]
+            if phase is HeadingPhase.APPLIED:
+                self._reject("command_refuse_applied")
+                reason = "refuse: applied; undo it instead"
+                return [CommandResult(t_s, CommandOutcome.DENIED, reason)]
+            self._reject("command_refuse_not_ready")
+            return [CommandResult(t_s, CommandOutcome.ACCEPTED)]
+        if phase is HeadingPhase.APPLIED:
+            return [*self.undo(t_s), CommandResult(t_s, CommandOutcome.ACCEPTED)]
+        self._reject("command_undo_not_applied")
+        return [CommandResult(t_s, CommandOutcome.DENIED, f"undo: none applied ({status})")]
 
     def apply(self, t_s: float) -> list[Output]:
         """Apply the READY candidate (confirmation): ``HDG_APPLIED``; else nothing."""
@@ -129,9 +180,37 @@ class HeadingCorrector:
             return []
         self._applied = self._candidate
         self.phase = HeadingPhase.APPLIED
+        self._rejected = False
         text = self._format(self._applied)
         logger.info("heading correction applied: %s", text)
         return [Alert(t_s, AlertCode.HDG_APPLIED, Severity.NOTICE, text)]
+
+    def undo(self, t_s: float) -> list[Output]:
+        """Remove the applied correction (``HDG_UNDONE``): the heading is the autopilot's
+        again and the candidate is READY, to confirm again or refuse; else nothing."""
+        applied = self._applied
+        if self.phase is not HeadingPhase.APPLIED or applied is None:
+            self._reject("undo_not_applied")
+            return []
+        self._applied = None
+        self._candidate = applied
+        self.phase = HeadingPhase.READY
+        text = self._format(applied)
+        logger.info("heading correction undone: %s", text)
+        return [Alert(t_s, AlertCode.HDG_UNDONE, Severity.NOTICE, f"{text} removed")]
+
+    def end_taxi(self, t_s: float) -> list[Output]:
+        """Airborne: the taxi is over. An unfinished accumulation (or a rejected one) is
+        dropped, IDLE (``HDG_IDLE``); a READY or APPLIED correction stands."""
+        if self.phase is not HeadingPhase.ACCUMULATING:
+            return []
+        before = self.status
+        self._restart()
+        self._rejected = False
+        self._park.reset()
+        if before is HeadingStatus.IDLE:
+            return []
+        return [Alert(t_s, AlertCode.HDG_IDLE, Severity.NOTICE, "airborne: none applied")]
 
     def on_gnss(self, fix: GnssFix) -> list[Output]:
         """One cycle: park check, straight-leg test, recursions, criteria, publication."""
@@ -163,12 +242,43 @@ class HeadingCorrector:
             self._reject("not_on_ground")
         elif self.phase is HeadingPhase.ACCUMULATING:
             out.extend(self._park_step(fix, vn, ve, speed))
+            before = self.status
             self._cycle(fix, vn, ve, speed)
+            if before is not HeadingStatus.ACCUMULATING and self.status is (
+                HeadingStatus.ACCUMULATING
+            ):
+                source = self._source or self.config.track_source
+                text = f"started: {source} track"
+                out.append(Alert(fix.t_s, AlertCode.HDG_ACCUM, Severity.INFO, text))
             out.extend(self._maybe_judge(fix.t_s))
         out.extend(self._publish(fix.t_s, on_ground))
         return out
 
     # ------------------------------------------------------------------ results
+
+    @property
+    def status(self) -> HeadingStatus:
+        """What a ground station shows (``CMP_HDGS``): see :class:`HeadingStatus`."""
+        phase = self.phase
+        if phase is HeadingPhase.APPLIED:
+            return HeadingStatus.APPLIED
+        if phase is HeadingPhase.READY:
+            return HeadingStatus.READY
+        if self._rejected:
+            return HeadingStatus.REJECTED
+        return HeadingStatus.ACCUMULATING if self._sample.x_rad else HeadingStatus.IDLE
+
+    def describe(self) -> str:
+        """The status and its value, for an announcement (``applied 1.00 ±0.02 n=30``)."""
+        status = self.status
+        name = status.name.lower()
+        if status is HeadingStatus.APPLIED and self._applied is not None:
+            return f"{name} {self._format(self._applied)}"
+        if status is HeadingStatus.READY and self._candidate is not None:
+            return f"{name} {self._format(self._candidate)}"
+        if status is HeadingStatus.ACCUMULATING:
+            return f"{name} n={len(self._sample.x_rad)}"
+        return name
 
     @property
     def correction_rad(self) -> float:
@@ -302,6 +412,7 @@ class HeadingCorrector:
             spread_start=self._spread_start(),
             min_leg_cycles=cfg.min_leg_cycles,
         )
+        self._rejected = False
 
     def _source_for(self, fix: GnssFix) -> str:
         """The track source of this sample (fixed at its first cycle in ``auto``)."""
@@ -341,6 +452,7 @@ class HeadingCorrector:
         reason = self._park.step(fix, vn, ve, speed, self._ground)
         if reason is None:
             return []
+        self._rejected = True
         self.reject_alerts += 1
         return [Alert(fix.t_s, AlertCode.HDG_REJECT, Severity.WARNING, reason)]
 
@@ -355,6 +467,7 @@ class HeadingCorrector:
         if not verdict.ok:
             logger.warning("heading correction rejected: %s %s", verdict.reason, verdict.details)
             self._restart()
+            self._rejected = True
             self.reject_alerts += 1
             return [Alert(t_s, AlertCode.HDG_REJECT, Severity.WARNING, verdict.reason)]
         self._candidate = est

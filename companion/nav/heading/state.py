@@ -33,6 +33,17 @@ class HeadingPhase(enum.Enum):
     APPLIED = "applied"  # the correction is in use for this flight
 
 
+class HeadingStatus(enum.IntEnum):
+    """The correction's state as a ground station shows it: the value of ``CMP_HDGS``
+    (docs/mavlink.md). Derived from the phase, the current sample and the last verdict."""
+
+    IDLE = 0  # nothing accumulated: before the first straight-leg cycle, or airborne
+    ACCUMULATING = 1  # collecting straight-leg cycles
+    READY = 2  # all criteria hold: waiting for the ground station's confirmation
+    APPLIED = 3  # every estimator and the published heading use the correction
+    REJECTED = 4  # a criterion failed or the operator refused; until the next cycle
+
+
 def to_state(hc: HeadingCorrector) -> dict[str, Any]:
     """Everything of ``hc`` that must survive a restart, as a JSON-compatible dict."""
 
@@ -60,6 +71,7 @@ def to_state(hc: HeadingCorrector) -> dict[str, Any]:
         "rejections": dict(hc.rejections),
         "reject_alerts": hc.reject_alerts,
         "source": hc._source,
+        "rejected": hc._rejected,
     }
 
 
@@ -99,6 +111,7 @@ def restore_state(hc: HeadingCorrector, state: dict[str, Any]) -> None:
         if source is not None and source not in TRACK_SOURCES:
             raise ValueError(f"heading state malformed: source {source!r}")
         hc._source = source
+        hc._rejected = bool(state.get("rejected", False))
     except (KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"heading state malformed: {exc!r}") from exc
     lengths = {len(sample.t_s), len(sample.x_rad), len(sample.sigma_rad), len(sample.leg)}
