@@ -3,6 +3,7 @@ the example configuration are package data, ``companion install-unit`` writes th
 
 from __future__ import annotations
 
+import ast
 import stat
 import subprocess
 import sys
@@ -146,3 +147,25 @@ def test_install_unit_refuses_an_executable_path_with_spaces(
 ) -> None:
     assert main(["install-unit", "--print", "--exec", "/opt/my venv/bin/companion"]) == 1
     assert "white space" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- Python 3.10
+
+
+def test_async_code_catches_asyncio_timeout_error() -> None:
+    """Python 3.10 (JetPack 6): ``asyncio.wait_for`` raises ``asyncio.TimeoutError``, which
+    only became the builtin ``TimeoutError`` in 3.11; an ``async def`` that names the builtin
+    misses the timeout there (ruff's py311 rule UP041 rewrites one into the other)."""
+    found = []
+    for path in [
+        *sorted((ROOT / "companion").rglob("*.py")),
+        *sorted((ROOT / "tests").rglob("*.py")),
+    ]:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for func in ast.walk(tree):
+            if not isinstance(func, ast.AsyncFunctionDef):
+                continue
+            for node in ast.walk(func):
+                if isinstance(node, ast.Name) and node.id == "TimeoutError":
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert found == [], "use asyncio.TimeoutError in async code:\n" + "\n".join(found)
