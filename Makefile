@@ -4,8 +4,10 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 DEMO ?= approach_rtk20
-# the IMU grade of the demo flight (tactical.toml); empty for the MEMS-grade fixtures
-DEMO_CONFIG ?= sitl_fixtures/tactical.toml
+# the IMU grade preset of the demo flight (companion --grade): mems for the MEMS-grade fixtures
+DEMO_GRADE ?= tactical
+# an optional TOML file whose keys override the grade's
+DEMO_CONFIG ?=
 
 .PHONY: setup demo test lint bench clean
 
@@ -14,12 +16,12 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,plot]'
 	touch $@
 
 demo: setup
 	mkdir -p out
-	$(BIN)/companion replay sitl_fixtures/$(DEMO).tlog --output out/$(DEMO).out.tlog $(if $(DEMO_CONFIG),--config $(DEMO_CONFIG))
+	$(BIN)/companion replay sitl_fixtures/$(DEMO).tlog --output out/$(DEMO).out.tlog --grade $(DEMO_GRADE) $(if $(DEMO_CONFIG),--config $(DEMO_CONFIG))
 	$(BIN)/companion evaluate out/$(DEMO).out.tlog --truth sitl_fixtures/$(DEMO).truth.csv --plot out/$(DEMO).png
 
 lint: setup

@@ -1,4 +1,4 @@
-"""``companion``: run | replay | evaluate | simulate | console | config-template.
+"""``companion``: run | replay | evaluate | simulate | console | config-template | install-unit.
 
 The only place that configures logging and prints. Every expected failure
 (bad file, bad configuration, unknown scenario) is one line on stderr and a
@@ -13,13 +13,22 @@ import logging
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from companion import __version__
+
+if TYPE_CHECKING:
+    from companion.config import Config
 
 EXIT_USAGE = 2
 EXIT_FAILURE = 1
 
 log = logging.getLogger("companion")
+
+GRADE_HELP = (
+    "IMU grade preset the configuration starts from, before --config's keys: mems (the "
+    "default) or tactical (config-template --grade G prints it)"
+)
 
 
 def _setup_logging(level: str) -> None:
@@ -34,6 +43,14 @@ def _progress(line: str) -> None:
     print(f"\r{line}", end="", file=sys.stderr, flush=True)
 
 
+def _load_config(args: argparse.Namespace) -> Config:
+    """``--grade`` (an IMU grade's preset, default the defaults) with ``--config``'s keys."""
+    from companion.config import load_config
+    from companion.presets import grade_config
+
+    return load_config(args.config, None if args.grade is None else grade_config(args.grade))
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from companion.mavlink.link import parse_url
 
@@ -41,10 +58,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for url in (args.master, args.gcs):
         if url:
             parse_url(url)
-    from companion.config import load_config
     from companion.service import run_service
 
-    config = load_config(args.config)
+    config = _load_config(args)
     link = config.link
     if args.master:
         link = replace(link, master=args.master)
@@ -56,10 +72,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from companion.config import load_config
     from companion.replay import replay
 
-    config = load_config(args.config)
+    config = _load_config(args)
     args.output.parent.mkdir(parents=True, exist_ok=True)
     summary = replay(args.input, args.output, config, None if args.quiet else _progress)
     if not args.quiet:
@@ -72,6 +87,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from companion.evaluate import evaluate
 
+    if args.plot is not None:  # before the work: a missing extra is one line, not a traceback
+        from companion.evaluate.plot import require_matplotlib
+
+        require_matplotlib()
     evaluation = evaluate(args.output_tlog, args.truth, args.events)
     if args.json:
         print(json.dumps(evaluation.to_dict(), indent=2, sort_keys=True))
@@ -110,8 +129,25 @@ def _cmd_console(args: argparse.Namespace) -> int:
 
 def _cmd_config_template(args: argparse.Namespace) -> int:
     from companion.config import template
+    from companion.presets import grade_template
 
-    print(template())
+    print(template() if args.grade is None else grade_template(args.grade))
+    return 0
+
+
+def _cmd_install_unit(args: argparse.Namespace) -> int:
+    from companion import deploy
+
+    executable = args.executable or deploy.installed_executable()
+    if args.print_only:
+        print(deploy.unit_text(executable), end="")
+        return 0
+    path = deploy.install_unit(args.dir or deploy.SYSTEMD_UNIT_DIR, executable)
+    print(path)
+    print(
+        "then: systemctl daemon-reload && systemctl enable --now companion (docs/deploy.md)",
+        file=sys.stderr,
+    )
     return 0
 
 
@@ -131,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--master", help="autopilot link URL (overrides the config)")
     p.add_argument("--gcs", help="ground-station link URL (overrides the config)")
     p.add_argument("--config", type=Path, help="TOML configuration file")
+    p.add_argument("--grade", help=GRADE_HELP)
     p.add_argument("--record-dir", help="flight recorder folder ('' disables)")
     p.set_defaults(func=_cmd_run)
 
@@ -138,6 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("input", type=Path, help="recorded flight (.tlog)")
     p.add_argument("--output", "-o", type=Path, required=True, help="what the service sends")
     p.add_argument("--config", type=Path, help="TOML configuration file")
+    p.add_argument("--grade", help=GRADE_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.set_defaults(func=_cmd_replay)
 
@@ -164,7 +202,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_console)
 
     p = sub.add_parser("config-template", help="print every configuration key with defaults")
+    p.add_argument("--grade", help="print the values of this IMU grade's preset (mems, tactical)")
     p.set_defaults(func=_cmd_config_template)
+
+    p = sub.add_parser("install-unit", help="write the systemd unit (--print: to stdout)")
+    p.add_argument("--print", dest="print_only", action="store_true", help="print; write nothing")
+    p.add_argument("--dir", type=Path, help="folder to write it to (default /etc/systemd/system)")
+    p.add_argument(
+        "--exec",
+        dest="executable",
+        help="companion executable for ExecStart (default: this installation's)",
+    )
+    p.set_defaults(func=_cmd_install_unit)
     return parser
 
 
@@ -189,6 +238,7 @@ _EXPECTED_ERRORS = (
     ("companion.evaluate.results", "EvaluationError"),
     ("companion.mavlink.link", "LinkError"),
     ("companion.mavlink.tlog", "TlogError"),
+    ("companion.evaluate.plot", "PlotUnavailableError"),
 )
 """The package's exceptions a user can cause (one line, exit 1), by module."""
 

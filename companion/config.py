@@ -10,7 +10,9 @@ a value of the wrong type or a value the block rejects is a :class:`ConfigError`
 whose one-line message names ``[block] key``.
 
 ``companion config-template`` prints every block with its keys, defaults and
-documentation: the example ``systemd/companion.toml`` is that output.
+documentation: the example ``companion/systemd/companion.toml`` is that output. An IMU
+grade's preset (:mod:`companion.presets`) is a whole :class:`Config` that a file's keys
+override (``base``) and that the template can print.
 """
 
 from __future__ import annotations
@@ -18,12 +20,17 @@ from __future__ import annotations
 import ast
 import dataclasses
 import inspect
-import tomllib
+import sys
 import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10 (JetPack 6): the same parser, from PyPI
+    import tomli as tomllib
 
 from companion.engine.config import EngineConfig
 from companion.integrity.coast import CoastConfig
@@ -124,22 +131,26 @@ class Config:
     heading: HeadingConfig = field(default_factory=HeadingConfig)
     blend: BlendConfig = field(default_factory=lambda: BlendConfig.for_grade("mems"))
     """The GNSS/INS blend; its noise defaults are a typical autopilot MEMS IMU's (for a
-    tactical-grade IMU, see sitl_fixtures/tactical.toml)."""
+    tactical-grade IMU, the preset ``--grade tactical``: :mod:`companion.presets`)."""
     integrity: IntegrityConfig = field(default_factory=IntegrityConfig)
     potential: PotentialConfig = field(default_factory=PotentialConfig)
     coast: CoastConfig = field(default_factory=lambda: CoastConfig.for_grade("mems"))
     """The coasting inertial references (``engine.inertial_reference``): the IMU grade's
-    figures; sitl_fixtures/tactical.toml has the tactical grade's."""
+    figures; the preset ``--grade tactical`` has the tactical grade's."""
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     signing: SigningConfig = field(default_factory=SigningConfig)
     """MAVLink 2 message signing per link ([signing.autopilot], [signing.gcs])."""
 
 
-def load_config(path: Path | None) -> Config:
-    """Read a TOML file (``None``: all defaults). Raises ConfigError naming the key."""
+def load_config(path: Path | None, base: Config | None = None) -> Config:
+    """Read a TOML file (``None``: no keys). Raises ConfigError naming the key.
+
+    The file's keys replace those of ``base`` (default: ``Config()``, all defaults; an IMU
+    grade's preset from :func:`companion.presets.grade_config`).
+    """
     if path is None:
-        return Config()
+        return Config() if base is None else base
     try:
         with open(path, "rb") as fh:
             data = tomllib.load(fh)
@@ -149,13 +160,14 @@ def load_config(path: Path | None) -> Config:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    return config_from_dict(data)
+    return config_from_dict(data, base)
 
 
-def config_from_dict(data: dict[str, Any]) -> Config:
-    """Build a Config from parsed TOML. Raises ConfigError naming the key."""
+def config_from_dict(data: dict[str, Any], base: Config | None = None) -> Config:
+    """Build a Config from parsed TOML: ``base`` (default ``Config()``) with the keys of
+    ``data`` replaced. Raises ConfigError naming the key."""
     blocks: dict[str, Any] = {}
-    defaults = Config()
+    defaults = Config() if base is None else base
     known_blocks = [f.name for f in dataclasses.fields(Config)]
     for block, table in data.items():
         if block not in known_blocks:
@@ -163,7 +175,7 @@ def config_from_dict(data: dict[str, Any]) -> Config:
         if not isinstance(table, dict):
             raise ConfigError(f"[{block}] must be a table")
         blocks[block] = _build_block(block, getattr(defaults, block), table)
-    return Config(**blocks)
+    return dataclasses.replace(defaults, **blocks)
 
 
 def _build_block(block: str, default: Any, table: dict[str, Any]) -> Any:
@@ -237,10 +249,11 @@ def _coerce(block: str, key: str, hint: Any, value: Any) -> Any:
     return value
 
 
-def template() -> str:
-    """Every block and key with its default and documentation, as TOML."""
-    lines = ["# companion configuration: every key, with its default.", ""]
-    defaults = Config()
+def template(values: Config | None = None, about: str = "every key, with its default") -> str:
+    """Every block and key with its value in ``values`` (default: ``Config()``, the
+    defaults) and its documentation, as TOML; ``about`` completes the first line."""
+    lines = [f"# companion configuration: {about}.", ""]
+    defaults = Config() if values is None else values
     for block in dataclasses.fields(Config):
         lines += _template_block(block.name, getattr(defaults, block.name))
     return "\n".join(lines)

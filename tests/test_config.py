@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
-import tomllib
+import sys
 
 import pytest
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 
 from companion.config import Config, ConfigError, config_from_dict, load_config, template
 
@@ -68,18 +73,18 @@ def test_missing_and_malformed_files(tmp_path):
 def test_example_config_in_systemd_folder_is_loadable():
     from pathlib import Path
 
-    example = Path(__file__).resolve().parent.parent / "systemd" / "companion.toml"
+    example = Path(__file__).resolve().parent.parent / "companion" / "systemd" / "companion.toml"
     with open(example, "rb") as fh:
         tomllib.load(fh)
     load_config(example)
 
 
 def test_example_config_is_the_current_template():
-    """systemd/companion.toml is `companion config-template` output: regenerate it
+    """companion/systemd/companion.toml is `companion config-template` output: regenerate it
     when a block gains a key."""
     from pathlib import Path
 
-    example = Path(__file__).resolve().parent.parent / "systemd" / "companion.toml"
+    example = Path(__file__).resolve().parent.parent / "companion" / "systemd" / "companion.toml"
     assert example.read_text().strip() == template().strip()
 
 

@@ -117,7 +117,7 @@ def _run_timer(heartbeat_rate_hz: float, watchdog_s: float | None, seconds: floa
     service.notifier.notify = fed.append  # type: ignore[method-assign]
 
     async def run() -> None:
-        with contextlib.suppress(TimeoutError):
+        with contextlib.suppress(asyncio.TimeoutError):
             await asyncio.wait_for(service._timer(), seconds)
 
     asyncio.run(run())

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-UNIT = ROOT / "systemd" / "companion.service"
+UNIT = ROOT / "companion" / "systemd" / "companion.service"
 
 
 def test_unit_has_the_promised_settings():

@@ -157,7 +157,7 @@ async def watch(url: str, once: bool = False, duration_s: float | None = None) -
         while t_end is None or time.monotonic() < t_end:
             try:
                 data = await asyncio.wait_for(link.recv(), timeout=REDRAW_S)
-            except TimeoutError:
+            except asyncio.TimeoutError:
                 data = b""
             now = time.time()
             for msg in parser.feed(data):

@@ -11,7 +11,10 @@
 * event windows shaded and labelled in both error panels; alerts as vertical lines with their
   code (red: loss and fault alerts, dotted when false; green: status reports).
 
-Matplotlib is used through its object API on an Agg canvas (no pyplot global state).
+Matplotlib is used through its object API on an Agg canvas (no pyplot global state). It is
+an optional extra (``pip install 'companion[plot]'``): this module imports it only when it
+draws, so the service installs and runs without it, and :func:`require_matplotlib` turns its
+absence into one line that names the extra.
 
 See ``docs/replay.md`` for the replay and evaluation contract.
 """
@@ -20,16 +23,40 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from companion.evaluate.results import Evaluation
 from companion.evaluate.score import FALSE_ALERT_CODES
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
 _log = logging.getLogger(__name__)
+
+PLOT_EXTRA = "companion[plot]"
+"""The optional extra that brings matplotlib."""
+
+
+class PlotUnavailableError(RuntimeError):
+    """Plotting was asked for but matplotlib cannot be imported; the message names the extra."""
+
+
+def require_matplotlib() -> None:
+    """Raise :class:`PlotUnavailableError` unless matplotlib imports.
+
+    Called before any work that ends in a plot, so that a missing extra costs one line
+    (``... pip install 'companion[plot]'``) and not a traceback after the evaluation.
+    """
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError as exc:
+        raise PlotUnavailableError(
+            f"plotting needs matplotlib ({exc}): pip install '{PLOT_EXTRA}'"
+        ) from None
+
 
 EVENT_COLOURS: dict[str, str] = {
     "outage": "tab:red",
@@ -69,7 +96,16 @@ def plot_evaluation(evaluation: Evaluation, png_path: Path, dpi: int = 110) -> F
     -------
     Figure
         The figure drawn (three axes: track, horizontal error, vertical error).
+
+    Raises
+    ------
+    PlotUnavailableError
+        matplotlib is not installed (the ``plot`` extra).
     """
+    require_matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     s = evaluation.series
     fig = Figure(figsize=(11.0, 12.0), layout="constrained")
     FigureCanvasAgg(fig)

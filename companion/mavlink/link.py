@@ -261,7 +261,7 @@ class SerialLink(Link):
             loop.add_writer(self._fd, _wake, fut)
             try:
                 await asyncio.wait_for(fut, remaining)
-            except TimeoutError:
+            except asyncio.TimeoutError:
                 self._send_failed("timeout")
                 return
             finally:
@@ -394,7 +394,7 @@ class TcpClientLink(Link):
             self._reader, self._writer = await asyncio.wait_for(
                 asyncio.open_connection(self._host, self._port), timeout_s
             )
-        except (OSError, TimeoutError) as exc:
+        except (OSError, asyncio.TimeoutError) as exc:
             raise LinkError(f"cannot connect {self.url}: {exc}") from exc
 
     async def recv(self) -> bytes:
@@ -418,7 +418,7 @@ class TcpClientLink(Link):
             w.write(data)
             await asyncio.wait_for(w.drain(), _SEND_TIMEOUT_S)
             self.bytes_out += len(data)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, asyncio.TimeoutError) as exc:
             self._send_failed(exc)
 
     async def close(self) -> None:
@@ -426,7 +426,7 @@ class TcpClientLink(Link):
             self._closed = True
             if self._writer is not None:
                 self._writer.close()
-                with contextlib.suppress(OSError, TimeoutError):
+                with contextlib.suppress(OSError, asyncio.TimeoutError):
                     await asyncio.wait_for(self._writer.wait_closed(), 1.0)
 
 
@@ -497,7 +497,7 @@ class TcpServerLink(Link):
         for w in list(self._clients):
             try:
                 await asyncio.wait_for(w.drain(), _SEND_TIMEOUT_S)
-            except (OSError, TimeoutError) as exc:
+            except (OSError, asyncio.TimeoutError) as exc:
                 self._send_failed(exc)
                 self._clients.discard(w)
                 w.close()
@@ -512,7 +512,7 @@ class TcpServerLink(Link):
             self._clients.clear()
             self._queue.put_nowait(None)
             if self._server is not None:
-                with contextlib.suppress(TimeoutError):
+                with contextlib.suppress(asyncio.TimeoutError):
                     await asyncio.wait_for(self._server.wait_closed(), 1.0)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -81,7 +81,9 @@ def _floats(value: Any, shape: tuple[int, ...]) -> list[Any]:
     if shape == (3,):
         vn, ve, vd = (float(v) for v in value)
         return [vn, ve, vd]
-    return np.asarray(value, dtype=np.float64).reshape(shape).tolist()  # type: ignore[no-any-return]
+    # cast: numpy's stubs type tolist() by the array's static shape, which reshape(shape)
+    # does not give (under Python 3.10 they infer a scalar)
+    return cast("list[Any]", np.asarray(value, dtype=np.float64).reshape(shape).tolist())
 
 
 def _clamp_int(v: float, lo: int, hi: int) -> int:
