@@ -367,7 +367,7 @@ def test_a_udpin_link_that_does_not_follow_senders_replies_only_to_the_adopted_o
             assert await asyncio.wait_for(server.recv(), 5.0) == b"unsigned"  # not adopted
             await server.send(b"reply")
             assert await asyncio.wait_for(gcs.recv(), 5.0) == b"reply"
-            with pytest.raises(TimeoutError):
+            with pytest.raises(asyncio.TimeoutError):
                 await asyncio.wait_for(stranger.recv(), 0.2)
         finally:
             for link in (gcs, stranger, server):
