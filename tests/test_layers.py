@@ -48,6 +48,7 @@ APPLICATION = frozenset(
         "console",
         "evaluate",
         "notify",
+        "params",
         "pipeline",
         "recorder",
         "replay",
