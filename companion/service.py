@@ -36,18 +36,51 @@ from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, open_link
 from companion.notify import SystemdNotifier
+from companion.params import load_overrides, saved_form
 from companion.pipeline import Pipeline
 from companion.recorder import Recorder
 
 log = logging.getLogger(__name__)
+
+PARAMS_FILE = "params.json"
+"""The parameters set over MAVLink, kept beside ``link.state_file``."""
+
+
+def params_path(config: Config) -> Path | None:
+    """Where the parameters set over MAVLink are kept (None: no state file, not kept)."""
+    state_file = config.link.state_file
+    return Path(state_file).with_name(PARAMS_FILE) if state_file else None
+
+
+def load_params(config: Config) -> tuple[Config, dict[str, object]]:
+    """``config`` with the parameters saved in :func:`params_path` applied over it (each
+    validated as when it was set; one that no longer is is dropped, with a warning), and
+    the values applied."""
+    path = params_path(config)
+    if path is None or not path.exists():
+        return config, {}
+    try:
+        saved = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        log.warning("parameter file %s unreadable (%s): TOML configuration only", path, exc)
+        return config, {}
+    config, applied, problems = load_overrides(config, saved)
+    for problem in problems:
+        log.warning("parameter file %s: %s: dropped", path, problem)
+    if applied:
+        log.info("%d parameters set over MAVLink loaded from %s", len(applied), path)
+    return config, applied
 
 
 class Service:
     """Run the pipeline on live links until stopped."""
 
     def __init__(self, config: Config) -> None:
+        config, param_overrides = load_params(config)
         self.config = config
         self.pipeline = Pipeline(config)
+        self.pipeline.params.overrides.update(param_overrides)
+        self._saved_params = 0
         self.notifier = SystemdNotifier()
         self._links: dict[str, Link] = {}
         self._stop = asyncio.Event()
@@ -162,6 +195,23 @@ class Service:
         except OSError as exc:
             log.error("cannot save state to %s: %s", path, exc)
 
+    def _save_params(self) -> None:
+        """Write the parameters set over MAVLink atomically (write, fsync, rename)."""
+        path = params_path(self.config)
+        if path is None:
+            log.warning("no link.state_file: parameters set over MAVLink are not kept")
+            return
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with open(tmp, "w") as fh:
+                json.dump(saved_form(self.pipeline.params.overrides), fh, indent=1)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except OSError as exc:
+            log.error("cannot save parameters to %s: %s", path, exc)
+
     async def _on_bytes(self, parser: FrameParser, data: bytes) -> None:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
@@ -176,6 +226,9 @@ class Service:
             if self.pipeline.engine.state_changes != self._saved_changes:
                 self._saved_changes = self.pipeline.engine.state_changes
                 self._save_state()
+            if self.pipeline.params.changes != self._saved_params:
+                self._saved_params = self.pipeline.params.changes
+                self._save_params()
 
     async def _send(self, frames: list[bytes], t_s: float) -> None:
         for frame in frames:
