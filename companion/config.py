@@ -166,16 +166,25 @@ def load_config(path: Path | None, base: Config | None = None) -> Config:
 def config_from_dict(data: dict[str, Any], base: Config | None = None) -> Config:
     """Build a Config from parsed TOML: ``base`` (default ``Config()``) with the keys of
     ``data`` replaced. Raises ConfigError naming the key."""
+    return merge_config(Config() if base is None else base, data)
+
+
+def merge_config(config: Config, data: dict[str, Any]) -> Config:
+    """``config`` with the keys of ``data`` (TOML-shaped: ``{block: {key: value}}``,
+    sub-blocks as sub-tables) replaced, each block validated as a TOML file's is (the
+    same coercion, ranges and checks). Raises ConfigError naming the key.
+
+    ``None`` unsets an optional key (TOML has no null; the parameter protocol and its
+    saved values have)."""
     blocks: dict[str, Any] = {}
-    defaults = Config() if base is None else base
     known_blocks = [f.name for f in dataclasses.fields(Config)]
     for block, table in data.items():
         if block not in known_blocks:
             raise ConfigError(f"unknown block [{block}] (known: {', '.join(known_blocks)})")
         if not isinstance(table, dict):
             raise ConfigError(f"[{block}] must be a table")
-        blocks[block] = _build_block(block, getattr(defaults, block), table)
-    return dataclasses.replace(defaults, **blocks)
+        blocks[block] = _build_block(block, getattr(config, block), table)
+    return dataclasses.replace(config, **blocks)
 
 
 def _build_block(block: str, default: Any, table: dict[str, Any]) -> Any:
@@ -207,6 +216,8 @@ def _coerce(block: str, key: str, hint: Any, value: Any) -> Any:
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
         errors = []
         for arm in args:
             if arm is type(None):

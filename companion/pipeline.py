@@ -8,11 +8,14 @@ wall time live, log time in a replay).
 
 It owns the decoder (MAVLink -> typed samples), the pure engine, the encoder
 (outputs -> MAVLink), the stream requests made when the autopilot first
-appears and after it reboots, the check of the rates actually received, and
-the periodic output (our HEARTBEAT at ``link.heartbeat_rate_hz``, its
-``system_status`` from the navigation's health) with its clock: a driver asks
-:meth:`Pipeline.next_due_s` when to call :meth:`Pipeline.on_timer` next, on the
-same clock as the ``t_rx_s`` it passes (docs/replay.md).
+appears and after it reboots, the check of the rates actually received, the
+parameter protocol (:mod:`companion.params`: the configuration as MAVLink
+parameters; a live change applied by :meth:`Pipeline.reconfigure`), and the
+periodic output (our HEARTBEAT at ``link.heartbeat_rate_hz``, its
+``system_status`` from the navigation's health; the paced rest of a parameter
+list) with its clock: a driver asks :meth:`Pipeline.next_due_s` when to call
+:meth:`Pipeline.on_timer` next, on the same clock as the ``t_rx_s`` it passes
+(docs/replay.md).
 
 Commands (the MAVLink command protocol): every COMMAND_LONG or COMMAND_INT the
 decoder finds addressed to us is answered by exactly one COMMAND_ACK to its sender,
@@ -23,6 +26,7 @@ a result other than ACCEPTED or UNSUPPORTED comes with its reason in a
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -33,6 +37,7 @@ from companion.config import Config
 from companion.engine import Engine
 from companion.mavlink.commands import DecodedCommand, Retransmissions
 from companion.mavlink.decode import Decoder
+from companion.mavlink.decode.rejections import Rejected, count_rejection
 from companion.mavlink.encode import Encoder
 from companion.mavlink.ids import (
     MAV_RESULT_ACCEPTED,
@@ -44,7 +49,10 @@ from companion.mavlink.ids import (
     MAV_STATE_CRITICAL,
     MAV_STATE_STANDBY,
 )
+from companion.mavlink.params import REQUEST_TYPES as PARAM_REQUEST_TYPES
+from companion.mavlink.params import decode_request as decode_param_request
 from companion.mavlink.streams import RateMonitor, stream_requests
+from companion.params import LIVE_KEYS, ParamServer
 from companion.types import (
     Alert,
     AlertCode,
@@ -135,12 +143,17 @@ class Pipeline:
         """When our next HEARTBEAT is due (driver clock, s): at once before the first."""
         self.retransmissions = Retransmissions()
         """The last answer to each command sender (a lost ACK's command comes again)."""
+        self.params = ParamServer(self.config, self.config.encoder.dialect)
+        """The parameter protocol (companion.params): its ``overrides`` are what the
+        driver persists whenever its ``changes`` move."""
 
     # ------------------------------------------------------------------ in
 
     def on_message(self, msg: Any, t_rx_s: float) -> list[bytes]:
         """Take one parsed MAVLink message; return the frames to send."""
         self.stats.messages_in += 1
+        if msg._type in PARAM_REQUEST_TYPES:
+            return self._on_param_request(msg, t_rx_s)
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
             command = self.decoder.take_command()
@@ -179,17 +192,82 @@ class Pipeline:
     def next_due_s(self) -> float:
         """When :meth:`on_timer` next has something to send, on the driver's ``t_rx_s``
         clock (s); ``-inf`` before the first call: due at once."""
-        return self._next_heartbeat_s
+        return min(self._next_heartbeat_s, self.params.next_due_s())
 
     def on_timer(self, t_rx_s: float) -> list[bytes]:
-        """The periodic output due at ``t_rx_s`` (nothing when called early): our
-        HEARTBEAT, the next one a heartbeat period after ``t_rx_s``. A replay calls it
-        before the first message received at or after :meth:`next_due_s`, the service
-        when its timer wakes."""
+        """The periodic output due at ``t_rx_s`` (nothing when called early): the next
+        PARAM_VALUEs of a parameter list being sent, and our HEARTBEAT, the next one a
+        heartbeat period after ``t_rx_s``. A replay calls it before the first message
+        received at or after :meth:`next_due_s`, the service when its timer wakes."""
+        frames = [self._pack(m) for m in self.params.on_timer(t_rx_s)]
         if t_rx_s < self._next_heartbeat_s:
-            return []
+            return frames
         self._next_heartbeat_s = t_rx_s + self._heartbeat_period_s
-        return [self.heartbeat()]
+        frames.append(self.heartbeat())
+        return frames
+
+    # ------------------------------------------------------------------ parameters
+
+    def _on_param_request(self, msg: Any, t_rx_s: float) -> list[bytes]:
+        """PARAM_REQUEST_LIST / _READ / PARAM_SET: answered by :attr:`params` when addressed
+        to us; a parameter set that the running service takes live is applied at once."""
+        decoder = self.decoder
+        try:
+            request = decode_param_request(
+                msg, self.encoder.system_id, decoder.config.own_component
+            )
+        except Rejected as exc:
+            count_rejection(decoder.rejections, exc.args[0])
+            return []
+        answer = self.params.handle(request, self.config, t_rx_s)
+        if answer.rejection is None:
+            decoder.accepted[msg._type] += 1
+        else:
+            count_rejection(decoder.rejections, answer.rejection)
+        frames = [self._pack(m) for m in answer.messages]
+        if answer.config is not None:
+            frames += self.reconfigure(answer.config)
+        return frames
+
+    def reconfigure(self, config: Config) -> list[bytes]:
+        """Run with ``config`` from now on. Only the keys of
+        :data:`companion.params.LIVE_KEYS` may differ from the running configuration
+        (ValueError otherwise, before anything changes). New stream rates are requested
+        from the autopilot at once (the frames returned); the heartbeat follows its new
+        rate from the next one; the encoder and the engine apply theirs."""
+        old = self.config
+        changed = [
+            f.name
+            for f in dataclasses.fields(Config)
+            if getattr(config, f.name) != getattr(old, f.name)
+        ]
+        for block in changed:
+            new_block, old_block = getattr(config, block), getattr(old, block)
+            fixed = [
+                f.name
+                for f in dataclasses.fields(new_block)
+                if getattr(new_block, f.name) != getattr(old_block, f.name)
+                and f.name not in LIVE_KEYS.get(block, frozenset())
+            ]
+            if fixed:
+                raise ValueError(f"[{block}] {', '.join(fixed)}: only at a restart")
+        self.config = config
+        frames: list[bytes] = []
+        for block in changed:
+            if block == "encoder":
+                self.encoder.reconfigure(config.encoder)
+            elif block == "link":
+                old_period_s = self._heartbeat_period_s
+                self._heartbeat_period_s = period_s = 1.0 / config.link.heartbeat_rate_hz
+                due_s = self._next_heartbeat_s
+                self._next_heartbeat_s = min(due_s, due_s - old_period_s + period_s)
+            elif block == "streams":
+                self.rates = RateMonitor(config.streams.rates_hz())
+                frames += self._request_streams()
+            else:
+                self.engine.reconfigure(block, getattr(config, block))
+        log.info("configuration changed live: [%s]", "], [".join(changed))
+        return frames
 
     # ------------------------------------------------------------------ out
 

@@ -53,6 +53,7 @@ from companion.mavlink.link import Link, LinkError, UdpLink, open_link, parse_ur
 from companion.mavlink.signing import LinkSigning, load_key, timestamp_at
 from companion.mavlink.watch import HeartbeatWatch
 from companion.notify import SystemdNotifier
+from companion.params import load_overrides, saved_form
 from companion.pipeline import Pipeline
 from companion.recorder import Recorder
 
@@ -72,12 +73,62 @@ def _log_retry(failures: int) -> bool:
     return failures & (failures - 1) == 0 or failures % RETRY_LOG_EVERY_MAX == 0
 
 
+PARAMS_FILE = "params.json"
+"""The parameters set over MAVLink, kept beside ``link.state_file``."""
+
+
+def params_path(config: Config) -> Path | None:
+    """Where the parameters set over MAVLink are kept (None: no state file, not kept)."""
+    state_file = config.link.state_file
+    return Path(state_file).with_name(PARAMS_FILE) if state_file else None
+
+
+def load_params(config: Config) -> tuple[Config, dict[str, object]]:
+    """``config`` with the parameters saved in :func:`params_path` applied over it (each
+    validated as when it was set; one that no longer is is dropped, with a warning), and
+    the values applied."""
+    path = params_path(config)
+    if path is None or not path.exists():
+        return config, {}
+    try:
+        saved = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        log.warning("parameter file %s unreadable (%s): TOML configuration only", path, exc)
+        return config, {}
+    config, applied, problems = load_overrides(config, saved)
+    for problem in problems:
+        log.warning("parameter file %s: %s: dropped", path, problem)
+    if applied:
+        log.info("%d parameters set over MAVLink loaded from %s", len(applied), path)
+    return config, applied
+
+
+def _write_json(path: Path, value: object, what: str, indent: int | None = None) -> bool:
+    """Write ``value`` to ``path`` atomically (write, fsync, rename); False, logged, when
+    it cannot be written."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "w") as fh:
+            json.dump(value, fh, indent=indent)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        log.error("cannot save %s to %s: %s", what, path, exc)
+        return False
+    return True
+
+
 class Service:
     """Run the pipeline on live links until stopped."""
 
     def __init__(self, config: Config) -> None:
+        config, param_overrides = load_params(config)
         self.config = config
         self.pipeline = Pipeline(config)
+        self.pipeline.params.overrides.update(param_overrides)
+        self._saved_params = 0
         self.notifier = SystemdNotifier()
         self._links: dict[str, Link] = {}
         self._stop = asyncio.Event()
@@ -229,20 +280,11 @@ class Service:
             log.info("state loaded from %s (applied if the autopilot has not rebooted)", path)
 
     def _save_state(self) -> None:
-        """Write the engine's persistent state atomically (write, fsync, rename)."""
-        if not self.config.link.state_file:
-            return
-        path = Path(self.config.link.state_file)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with open(tmp, "w") as fh:
-                json.dump(self.pipeline.engine.persistent_state(), fh)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except OSError as exc:
-            log.error("cannot save state to %s: %s", path, exc)
+        """Write the engine's persistent state atomically."""
+        if self.config.link.state_file:
+            _write_json(
+                Path(self.config.link.state_file), self.pipeline.engine.persistent_state(), "state"
+            )
 
     def _signing_path(self) -> Path | None:
         state_file = self.config.link.state_file
@@ -295,18 +337,16 @@ class Service:
         timestamp = max(s.timestamp for s in self.signing.values())
         if timestamp == self._signing_saved:
             return
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with open(tmp, "w") as fh:
-                json.dump({"timestamp_10us": timestamp}, fh)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except OSError as exc:
-            log.error("cannot save the signing timestamp to %s: %s", path, exc)
+        if _write_json(path, {"timestamp_10us": timestamp}, "the signing timestamp"):
+            self._signing_saved = timestamp
+
+    def _save_params(self) -> None:
+        """Write the parameters set over MAVLink atomically."""
+        path = params_path(self.config)
+        if path is None:
+            log.warning("no link.state_file: parameters set over MAVLink are not kept")
             return
-        self._signing_saved = timestamp
+        _write_json(path, saved_form(self.pipeline.params.overrides), "parameters", indent=1)
 
     async def _on_bytes(
         self, parser: FrameParser, data: bytes, watch: HeartbeatWatch | None = None
@@ -338,6 +378,9 @@ class Service:
             if self.pipeline.engine.state_changes != self._saved_changes:
                 self._saved_changes = self.pipeline.engine.state_changes
                 self._save_state()
+            if self.pipeline.params.changes != self._saved_params:
+                self._saved_params = self.pipeline.params.changes
+                self._save_params()
 
     async def _send(self, frames: list[bytes], t_s: float) -> None:
         now = timestamp_at(t_s) if self.signing else 0

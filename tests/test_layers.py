@@ -49,6 +49,7 @@ APPLICATION = frozenset(
         "deploy",
         "evaluate",
         "notify",
+        "params",
         "pipeline",
         "presets",
         "recorder",

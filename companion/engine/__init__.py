@@ -9,6 +9,6 @@
 """
 
 from companion.engine.config import NAVIGATORS, EngineConfig
-from companion.engine.core import Engine, EngineStats
+from companion.engine.core import LIVE_KEYS, Engine, EngineStats
 
-__all__ = ["NAVIGATORS", "Engine", "EngineConfig", "EngineStats"]
+__all__ = ["LIVE_KEYS", "NAVIGATORS", "Engine", "EngineConfig", "EngineStats"]

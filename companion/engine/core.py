@@ -29,6 +29,7 @@ where the engine sits between the drivers and the estimators.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -40,7 +41,7 @@ import numpy as np
 from companion.engine.bridge import PotentialBridge
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
-from companion.engine.publish import Publisher, publication_time_s
+from companion.engine.publish import Publisher, publication_time_s, tick
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
@@ -84,6 +85,20 @@ _HEADING_CODES = frozenset(
     }
 )
 """Alerts that change :meth:`Engine.persistent_state`."""
+
+LIVE_KEYS: dict[str, frozenset[str]] = {
+    "engine": frozenset(
+        {"publish_rate_hz", "status_rate_hz", "reanchor_distance_m", "primary_receiver"}
+    ),
+    "outage": frozenset(f.name for f in dataclasses.fields(OutageConfig)),
+    "heading": frozenset({"auto_apply", "publish_period_s"}),
+    "integrity": frozenset({"approach_category", "category_upgrade_dwell_s"}),
+}
+"""The configuration keys :meth:`Engine.reconfigure` applies to the running estimators,
+by block: those read where they are used (never turned into state when an estimator
+is built). The outage monitor reads all of its keys so; the publication and status
+clocks are re-based on the new rate. Every other key of the engine's blocks is built
+into an estimator's state and changes only with a new engine (a restart)."""
 
 
 @dataclass(slots=True)
@@ -347,6 +362,48 @@ class Engine:
             or self.integrity.exclude(primary)
         )
         return primary_down
+
+    # ------------------------------------------------------------------ configuration
+
+    def reconfigure(self, block: str, config: object) -> None:
+        """Run with ``config`` as the ``[block]`` configuration from now on.
+
+        Only the keys of :data:`LIVE_KEYS` may differ from the running configuration
+        (ValueError otherwise, and nothing changes): each estimator holding the block
+        reads it from the new configuration at its next use, and a restart of the
+        navigation (an autopilot reboot) keeps it.
+        """
+        current: object = {
+            "engine": self.config,
+            "outage": self._outage_config,
+            "heading": self._heading_config,
+            "integrity": self._integrity_config,
+        }.get(block)
+        if current is None or type(config) is not type(current):
+            raise ValueError(f"[{block}] cannot be changed while running")
+        changed = {
+            f.name
+            for f in dataclasses.fields(current)  # type: ignore[arg-type]
+            if getattr(current, f.name) != getattr(config, f.name)
+        }
+        fixed = changed - LIVE_KEYS[block]
+        if fixed:
+            raise ValueError(f"[{block}] {', '.join(sorted(fixed))}: only at a restart")
+        if isinstance(config, EngineConfig):
+            self.config = config
+            if "publish_rate_hz" in changed:
+                self._publish_rate_hz = config.publish_rate_hz
+                now = self.now_s
+                self._publish_tick = -1 if now is None else tick(now, config.publish_rate_hz)
+            if "status_rate_hz" in changed:
+                self.publisher.set_status_rate(config.status_rate_hz, self.now_s)
+        elif isinstance(config, OutageConfig):
+            self._outage_config = self.outage.config = config
+        elif isinstance(config, HeadingConfig):
+            self._heading_config = self.heading.config = config
+        elif isinstance(config, IntegrityConfig):
+            self._integrity_config = self.integrity.config = config
+            self.integrity.protection.config = config  # where the live keys are read
 
     # ------------------------------------------------------------------ persistence
 

@@ -68,6 +68,13 @@ class Publisher:
         self.satellites = 0
         """Satellites of the newest fused fix."""
 
+    def set_status_rate(self, status_rate_hz: float, now_s: float | None) -> None:
+        """Publish the status values at ``status_rate_hz`` from now on; the next status
+        tick is the first of the new rate after ``now_s`` (a lower rate does not wait for
+        its period index to catch up with the old one)."""
+        self._status_rate_hz = status_rate_hz
+        self._status_tick = -1 if now_s is None else tick(now_s, status_rate_hz)
+
     def publish(
         self,
         t_s: float,

@@ -58,7 +58,7 @@ STATUSTEXT, NAMED_VALUE_FLOAT); ArduPilot libraries/AP_GPS/AP_GPS_MAV.cpp
 (GPS_INPUT handling).
 """
 
-from companion.mavlink.encode.config import EncoderConfig
+from companion.mavlink.encode.config import LIVE_KEYS, EncoderConfig
 from companion.mavlink.encode.encoder import Encoder
 
-__all__ = ["Encoder", "EncoderConfig"]
+__all__ = ["LIVE_KEYS", "Encoder", "EncoderConfig"]

@@ -11,6 +11,22 @@ from companion.types import AlertCode
 OUTPUTS = ("auto", "gps_input", "global_position_sensor")
 """Choices of ``EncoderConfig.output``."""
 
+LIVE_KEYS = frozenset(
+    {
+        "output",
+        "gps_id",
+        "min_h_acc_m",
+        "min_v_acc_m",
+        "min_vel_acc_mps",
+        "uere_m",
+        "gps_input_yaw",
+        "statustext_min_interval_s",
+    }
+)
+"""The keys :meth:`Encoder.reconfigure <companion.mavlink.encode.Encoder.reconfigure>`
+applies to a running encoder: read from the configuration at each message. The dialect
+and the per-code STATUSTEXT intervals are built into it."""
+
 
 @dataclass(frozen=True, slots=True)
 class EncoderConfig:

@@ -15,7 +15,7 @@ import numpy as np
 
 from companion.mavlink import units
 from companion.mavlink.dialect import load_dialect
-from companion.mavlink.encode.config import EncoderConfig
+from companion.mavlink.encode.config import LIVE_KEYS, EncoderConfig
 from companion.mavlink.encode.packing import Packer
 from companion.mavlink.ids import (
     ALERT_PREFIX,
@@ -136,6 +136,19 @@ class Encoder:
         if not 1 <= int(value) <= 255:
             raise ValueError(f"system_id must be in 1..255, got {value}")
         self._packer.mav.srcSystem = int(value)
+
+    def reconfigure(self, config: EncoderConfig) -> None:
+        """Encode with ``config`` from the next message on; only the keys of
+        :data:`~companion.mavlink.encode.config.LIVE_KEYS` may differ from the running
+        configuration (ValueError otherwise, and nothing changes)."""
+        fixed = {
+            name
+            for name in EncoderConfig.__dataclass_fields__
+            if name not in LIVE_KEYS and getattr(config, name) != getattr(self.config, name)
+        }
+        if fixed:
+            raise ValueError(f"[encoder] {', '.join(sorted(fixed))}: only at a restart")
+        self.config = config
 
     @property
     def has_gnss_integrity(self) -> bool:
