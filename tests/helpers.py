@@ -3,15 +3,25 @@ depend on the full simulator (straight constant-velocity flight)."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from companion.nav.earth import gravity_mps2
 from companion.nav.frames import LocalFrame
 from companion.types import AttitudeSample, FixType, GnssFix, ImuSample, Sample
+
+FIXTURES = Path(__file__).resolve().parent.parent / "sitl_fixtures"
+TAXI = FIXTURES / "taxi.tlog"
+"""The bundled taxi: parked, straight legs, a heading correction READY at about 82 s."""
+TAXI_HEADING_ERROR_DEG: float = json.loads((FIXTURES / "taxi.json").read_text())["parameters"][
+    "heading_error_deg"
+]
+"""The heading error the simulator injected into the taxi's ATTITUDE (deg)."""
 
 ORIGIN = LocalFrame(math.radians(52.2), math.radians(20.9), 110.0)
 

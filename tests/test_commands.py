@@ -32,12 +32,9 @@ from companion.mavlink.tlog import TlogReader
 from companion.mavlink.units import CDEG_PER_RAD
 from companion.nav.heading import HeadingStatus
 from companion.pipeline import Pipeline
+from tests.helpers import TAXI, TAXI_HEADING_ERROR_DEG
 
 ROOT = Path(__file__).resolve().parent.parent
-TAXI = ROOT / "sitl_fixtures" / "taxi.tlog"
-INJECTED_DEG = json.loads((ROOT / "sitl_fixtures" / "taxi.json").read_text())["parameters"][
-    "heading_error_deg"
-]
 HEADING = 31010
 GCS_SYS, GCS_COMP = 255, 190
 
@@ -342,7 +339,7 @@ def test_undo_returns_every_estimator_to_the_uncorrected_heading(taxi, ready_at,
 
     assert one_ack(gcs.send(1)) == MAV_RESULT_ACCEPTED
     correction_deg = math.degrees(engine.heading.correction_rad)
-    assert correction_deg == pytest.approx(INJECTED_DEG, abs=0.1)
+    assert correction_deg == pytest.approx(TAXI_HEADING_ERROR_DEG, abs=0.1)
     # at once: every estimator uses the corrected heading
     corrected = autopilot_yaw_deg(ready_at) - correction_deg
     assert _wrap_deg(blend_yaw_deg() - corrected) == pytest.approx(0.0, abs=0.05)
@@ -368,7 +365,7 @@ def test_undo_returns_every_estimator_to_the_uncorrected_heading(taxi, ready_at,
     first_undone = [e for t, e in _heading_errors_deg(after, 1.0) if t < t_undo_s + 1.0]
     assert len(last_applied) >= 3 and len(first_undone) >= 3
     assert np.mean(last_applied) == pytest.approx(0.0, abs=0.1)
-    assert np.mean(first_undone) == pytest.approx(INJECTED_DEG, abs=0.1)
+    assert np.mean(first_undone) == pytest.approx(TAXI_HEADING_ERROR_DEG, abs=0.1)
     assert gcs.hdgs[-1] == HeadingStatus.READY  # the candidate, to confirm again or refuse
 
 

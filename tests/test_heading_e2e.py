@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,12 +17,7 @@ from companion.mavlink.tlog import TlogReader
 from companion.mavlink.units import CDEG_PER_RAD
 from companion.pipeline import Pipeline
 from companion.types import AlertCode
-
-ROOT = Path(__file__).resolve().parent.parent
-TAXI = ROOT / "sitl_fixtures" / "taxi.tlog"
-INJECTED_DEG = json.loads((ROOT / "sitl_fixtures" / "taxi.json").read_text())["parameters"][
-    "heading_error_deg"
-]
+from tests.helpers import TAXI, TAXI_HEADING_ERROR_DEG
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +48,7 @@ def test_taxi_replay_reaches_ready_within_a_tenth_of_a_degree(taxi_messages):
     ready = [a for a in pipeline.alerts if a.code is AlertCode.HDG_READY]
     assert len(ready) == 1
     value_deg = float(ready[0].text.split()[0])
-    assert abs(value_deg - INJECTED_DEG) < 0.1
+    assert abs(value_deg - TAXI_HEADING_ERROR_DEG) < 0.1
     # not applied without confirmation (auto_apply is off by default)
     assert pipeline.engine.heading.correction_rad == 0.0
 
@@ -96,7 +90,7 @@ def test_published_heading_is_corrected_against_truth(taxi_messages):
     assert len(before) > 100 and len(after) > 100
     # before: the blend's own heading (the autopilot's, partly refined by GNSS in the
     # taxi's turns) is still most of a degree off
-    assert np.mean(before) > 0.5 * INJECTED_DEG
+    assert np.mean(before) > 0.5 * TAXI_HEADING_ERROR_DEG
     print(f"heading error before {np.mean(before):.3f} deg, after {np.mean(after):.3f} deg")
     assert abs(np.mean(after)) < 0.05
     assert np.max(np.abs(after)) < 0.2
@@ -116,7 +110,7 @@ def test_confirmation_command_applies_and_is_acknowledged(taxi_messages):
     assert all(m.get_srcComponent() == MAV_COMP_ID_ONBOARD_COMPUTER for m in msgs)
     assert AlertCode.HDG_APPLIED in alert_codes(pipeline)
     assert pipeline.engine.heading.correction_rad == pytest.approx(
-        math.radians(INJECTED_DEG), abs=math.radians(0.1)
+        math.radians(TAXI_HEADING_ERROR_DEG), abs=math.radians(0.1)
     )
 
 

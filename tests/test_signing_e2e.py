@@ -36,12 +36,8 @@ from companion.mavlink.signing import (
 )
 from companion.mavlink.tlog import TlogReader
 from companion.service import SIGNING_STATE_FILE, Service
+from tests.helpers import TAXI, TAXI_HEADING_ERROR_DEG
 
-ROOT = Path(__file__).resolve().parent.parent
-TAXI = ROOT / "sitl_fixtures" / "taxi.tlog"
-INJECTED_DEG = json.loads((ROOT / "sitl_fixtures" / "taxi.json").read_text())["parameters"][
-    "heading_error_deg"
-]
 PASSPHRASE = "companion signing test"
 GCS_LINK_ID = 0
 OUR_LINK_ID = 1
@@ -264,7 +260,7 @@ def _drain_raw(sock: socket.socket) -> list[bytes]:
 def test_a_signed_ground_station_confirms_the_heading_correction(signed_run):
     assert signed_run["correction_when_ready_rad"] == 0.0
     applied = signed_run["correction_applied_rad"]
-    assert applied == pytest.approx(math.radians(INJECTED_DEG), abs=math.radians(0.1))
+    assert applied == pytest.approx(math.radians(TAXI_HEADING_ERROR_DEG), abs=math.radians(0.1))
     acks = signed_run["acks"]
     assert len(acks) == 1
     assert acks[0].command == MAV_CMD_USER_1 and acks[0].result == 0
@@ -272,7 +268,7 @@ def test_a_signed_ground_station_confirms_the_heading_correction(signed_run):
     assert len(signed_run["applied_texts"]) == 1
     gcs = signed_run["gcs"]
     print(
-        f"applied {math.degrees(applied):.3f} deg (injected {INJECTED_DEG} deg); "
+        f"applied {math.degrees(applied):.3f} deg (injected {TAXI_HEADING_ERROR_DEG} deg); "
         f"refused {signed_run['rejections']}; signed frames accepted "
         f"{signed_run['accepted_signed']}; ours verified by pymavlink "
         f"{gcs.mav.signing.goodsig_count}, bad {gcs.mav.signing.badsig_count}"
