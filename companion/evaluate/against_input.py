@@ -44,11 +44,11 @@ Concurrent fix
 2. Receiver use
     Time the receiver reports a 3-D fix with >= :data:`USE_MIN_SATELLITES` satellites,
     from :data:`USE_SETTLE_S` after its first 3-D fix (each fix weighted by the time to the
-    next, at most :func:`max_bracket_s`). The service is using it when its
-    latest ``CMP_OUTG`` (time since the last fused fix while in an outage, else 0) is 0
-    and its latest HEARTBEAT is ACTIVE (STANDBY = not started, CRITICAL = LOST), both no
-    older than :data:`STATUS_MAX_AGE_S`: navigation mode NORMAL or DEGRADED. Required
-    >= :data:`USE_REQUIRED`. (Whether a second source showed the receiver wrong is not
+    next, at most :func:`max_bracket_s`; the last by the median interval). The service
+    is using it when its latest ``CMP_OUTG`` (time since the last fused fix while in an
+    outage, else 0) is 0 and its latest HEARTBEAT is ACTIVE (STANDBY = not started,
+    CRITICAL = LOST), both no older than :data:`STATUS_MAX_AGE_S`: navigation mode NORMAL
+    or DEGRADED. Required >= :data:`USE_REQUIRED`. (Whether a second source showed the receiver wrong is not
     judged here.)
 3. GNSS gaps
     Consecutive receiver fixes (any receiver) :data:`GAP_MIN_S` or more apart in
@@ -608,7 +608,8 @@ def _receiver_use(inp: _Input, out: _Output) -> ReceiverUseResult:
     if f.t_u.size == 0:
         return ReceiverUseResult(0.0, 0.0, 0.0, 0.0, None, None)
     limit = max_bracket_s(f.t_u)
-    w = np.minimum(np.diff(f.t_u, append=f.t_u[-1] + limit), limit)
+    last = min(_median_interval(f.t_u), limit)  # the last fix counts one interval
+    w = np.minimum(np.diff(f.t_u, append=f.t_u[-1] + last), limit)
     good = (f.sats >= USE_MIN_SATELLITES) & (f.t_u >= f.t_u[0] + USE_SETTLE_S)
     outg = _latest(out.outg_t_u, out.outg, f.t_u, STATUS_MAX_AGE_S)
     hb = _latest(out.hb_t_rx, out.hb_status.astype(np.float64), f.t_rx, STATUS_MAX_AGE_S)
