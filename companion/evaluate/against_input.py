@@ -48,8 +48,8 @@ Concurrent fix
     is using it when its latest ``CMP_OUTG`` (time since the last fused fix while in an
     outage, else 0) is 0 and its latest HEARTBEAT is ACTIVE (STANDBY = not started,
     CRITICAL = LOST), both no older than :data:`STATUS_MAX_AGE_S`: navigation mode NORMAL
-    or DEGRADED. Required >= :data:`USE_REQUIRED`. (Whether a second source showed the receiver wrong is not
-    judged here.)
+    or DEGRADED. Required >= :data:`USE_REQUIRED`. (Whether a second source showed the
+    receiver wrong is not judged here.)
 3. GNSS gaps
     Consecutive receiver fixes (any receiver) :data:`GAP_MIN_S` or more apart in
     autopilot time; also the end of the log when the data streams run on that long
