@@ -57,7 +57,9 @@ Concurrent fix
 
     * Alert latency: from the last fix's record to the first :data:`LOSS_ALERT_CODES`
       alert before the gap's first fix; 0 when the service was already in an outage (its
-      latest loss alert newer than its latest GNSS_BACK); "missed" when none.
+      latest loss alert newer than its latest GNSS_BACK, and its ``CMP_OUTG`` at the last
+      fix, where fresh, not 0: a GNSS_BACK may have been rate-limited away); "missed"
+      when none.
       Required <= :data:`GAP_ALERT_MAX_S`.
     * Closure: the last solution published before the first fix after the gap was read
       (record time strictly earlier), carried to the fix's time with its own published
@@ -671,6 +673,9 @@ def _gaps(inp: _Input, out: _Output) -> tuple[GapsSummary, tuple[GapResult, ...]
         already = bool(prior_loss.size) and (
             not prior_back.size or prior_loss.max() > prior_back.max()
         )
+        # a GNSS_BACK can be rate-limited away: CMP_OUTG, where fresh, must agree
+        outg = _latest(out.outg_t_u, out.outg, np.array([t_l]), STATUS_MAX_AGE_S)[0]
+        already = already and not outg == 0.0
         latency: float | None
         if already:
             latency = 0.0
