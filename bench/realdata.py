@@ -129,7 +129,10 @@ def main(argv: list[str] | None = None) -> int:
     # other data sets' rows (dicts of column -> cell) are appended here
     print_table(rows)
     print()
-    print("GNSS gaps >= 3 s (autopilot time s; horizontal m; ratio = closure / best of hold, cv)")
+    print(
+        "GNSS gaps >= 3 s (autopilot time s; horizontal m; ratio = closure / best of hold and"
+        " cv; ratio and 99 % judged only where the IMU runs >= 20 Hz)"
+    )
     print(f"  {'flight':<38}" + GAP_HEADER[2:])
     for run in runs:
         for g in getattr(run.get("result"), "gaps", ()):

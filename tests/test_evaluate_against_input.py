@@ -4,6 +4,7 @@ hand, and the ruler on a real flight (bundled: tests/data/real/log171, README th
 from __future__ import annotations
 
 import csv
+import importlib.util
 import json
 import math
 from pathlib import Path
@@ -426,3 +427,37 @@ def test_real_log_replayed_and_scored(tmp_path: Path) -> None:
     }  # fmt: skip
     assert "overall:" in res.to_text()
     assert json.dumps(res.to_dict())
+
+
+def _bench_realdata():  # type: ignore[no-untyped-def]
+    path = Path(__file__).resolve().parents[1] / "bench" / "realdata.py"
+    spec = importlib.util.spec_from_file_location("bench_realdata", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_bench_realdata_table_skips_and_scores(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bench = _bench_realdata()
+    assert bench.main(["--flights", str(tmp_path / "absent")]) == 0
+    assert "skipped: no real data" in capsys.readouterr().out
+    flights = tmp_path / "flights"
+    (flights / "empty").mkdir(parents=True)
+    (flights / REAL_TLOG.stem).mkdir()
+    (flights / REAL_TLOG.stem / REAL_TLOG.name).symlink_to(REAL_TLOG)
+    assert bench.main(["--flights", str(flights), "--json", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert "skipped: no empty.tlog in the folder" in out
+    row = next(line for line in out.splitlines() if line.startswith(REAL_TLOG.stem))
+    assert row.rstrip().endswith(("PASS", "FAIL"))
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert [d["flight"] for d in doc] == ["empty", REAL_TLOG.stem]
+    assert doc[1]["n_fixes_3d"] == 1038 and "verdicts" in doc[1]
+    extra = [{"flight": "other", "new column": "1.0 PASS"}]
+    bench.print_table([{"flight": "a", "wrong>25m": "0 PASS"}, *extra])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["flight", "wrong>25m", "new", "column"]
+    assert lines[3].split() == ["other", "-", "1.0", "PASS"]
