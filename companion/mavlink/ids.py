@@ -111,6 +111,8 @@ GPS_RAIM_STATE_FAILED = 3
 
 STATUSTEXT_MAX_CHARS = 50
 """STATUSTEXT.text is char[50]; a shorter chunk ends a multi-chunk text."""
+STATUSTEXT_MAX_CHUNKS = 4
+"""Chunks of one alert at most (200 characters); the rest is cut."""
 NAMED_VALUE_MAX_CHARS = 10
 """NAMED_VALUE_FLOAT.name is char[10]."""
 

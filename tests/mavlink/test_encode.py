@@ -14,6 +14,7 @@ from companion.mavlink.decode import Decoder
 from companion.mavlink.encode import Encoder, EncoderConfig
 from companion.mavlink.framing import FrameParser
 from companion.mavlink.ids import MAV_COMP_ID_ONBOARD_COMPUTER
+from companion.mavlink.readback import PublishedText, TextJoiner
 from companion.types import (
     Alert,
     AlertCode,
@@ -139,9 +140,13 @@ def test_nonfinite_solution_not_encoded() -> None:
 def test_statustext_format_truncation_and_rate_limit() -> None:
     enc = Encoder(EncoderConfig(statustext_min_interval_s=5.0))
     a = Alert(t_s=10.0, code=AlertCode.GNSS_LOST, severity=Severity.WARNING, text="no fix " * 20)
-    (m,) = roundtrip(enc, enc.encode(a, AutopilotFlavour.ARDUPILOT))
-    assert m.severity == 4
-    assert m.text.startswith("CMP GNSS_LOST no fix") and len(m.text) == 50
+    chunks = roundtrip(enc, enc.encode(a, AutopilotFlavour.ARDUPILOT))
+    assert all(m.severity == 4 for m in chunks)
+    # 153 characters: chunks 50, 50, 50, 3 of one non-zero id, in order
+    assert [m.chunk_seq for m in chunks] == [0, 1, 2, 3]
+    assert len({m.id for m in chunks}) == 1 and chunks[0].id != 0
+    assert [len(m.text) for m in chunks] == [50, 50, 50, 3]
+    assert "".join(m.text for m in chunks) == ("CMP GNSS_LOST " + "no fix " * 20).rstrip()
     ap = AutopilotFlavour.ARDUPILOT
     assert enc.encode(Alert(12.0, AlertCode.GNSS_LOST, Severity.WARNING), ap) == []
     assert len(enc.encode(Alert(12.0, AlertCode.BRIDGING, Severity.NOTICE), ap)) == 1
@@ -150,10 +155,26 @@ def test_statustext_format_truncation_and_rate_limit() -> None:
     # a reboot (time going back) re-arms the code
     again = Alert(1.0, AlertCode.GNSS_LOST, Severity.CRITICAL, "x")
     (m,) = roundtrip(enc, enc.encode(again, AutopilotFlavour.ARDUPILOT))
-    assert m.text == "CMP GNSS_LOST x" and m.severity == 2
+    assert m.text == "CMP GNSS_LOST x" and m.severity == 2 and m.id == 0
     enc2 = Encoder(EncoderConfig(statustext_interval_overrides=(("CAT", 0.0),)))
     for _ in range(3):
         assert len(enc2.encode(Alert(1.0, AlertCode.CAT, Severity.INFO), AutopilotFlavour.PX4)) == 1
+
+
+def test_statustext_chunks_join_and_end() -> None:
+    """An exact multiple of 50 ends on an empty chunk; over 200 characters is cut; the
+    chunks join back through the read-back joiner."""
+    ap = AutopilotFlavour.ARDUPILOT
+    enc = Encoder(EncoderConfig(statustext_min_interval_s=0.0))
+    exact = "x" * (100 - len("CMP CAT "))
+    chunks = roundtrip(enc, enc.encode(Alert(1.0, AlertCode.CAT, Severity.INFO, exact), ap))
+    assert [len(m.text) for m in chunks] == [50, 50, 0]
+    long = roundtrip(enc, enc.encode(Alert(2.0, AlertCode.CAT, Severity.INFO, "y" * 500), ap))
+    assert [len(m.text) for m in long] == [50, 50, 50, 50, 0]
+    assert long[0].id == chunks[0].id + 1
+    joiner = TextJoiner()
+    done = [joiner.add(i, PublishedText(m.text, m.severity, m.id)) for i, m in enumerate(chunks)]
+    assert done[:2] == [None, None] and done[2] == (0, "CMP CAT " + exact, Severity.INFO)
 
 
 def test_named_value_float() -> None:

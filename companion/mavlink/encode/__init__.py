@@ -9,9 +9,10 @@ What each output becomes
     an UNKNOWN flavour gets GLOBAL_POSITION_INT only (we never feed a position
     to an autopilot we have not identified).
 :class:`Alert`
-    STATUSTEXT ``"CMP <CODE> <text>"`` truncated to 50 characters, severity
-    from the alert; at most one per code per ``statustext_min_interval_s`` of
-    the outputs' own ``t_s`` (suppressed ones are counted in
+    STATUSTEXT ``"CMP <CODE> <text>"``, severity from the alert; a text longer
+    than 50 characters is sent in MAVLink 2 chunks (one non-zero ``id``,
+    ``chunk_seq`` from 0, at most 4 chunks); at most one per code per
+    ``statustext_min_interval_s`` of the outputs' own ``t_s`` (suppressed ones are counted in
     :attr:`Encoder.suppressed`). A ``t_s`` earlier than the last sent one (a
     reboot) re-arms the code.
 :class:`NamedValue`

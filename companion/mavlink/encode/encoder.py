@@ -32,6 +32,7 @@ from companion.mavlink.ids import (
     MAVLINK_VERSION,
     NAMED_VALUE_MAX_CHARS,
     STATUSTEXT_MAX_CHARS,
+    STATUSTEXT_MAX_CHUNKS,
 )
 from companion.types import (
     Alert,
@@ -117,6 +118,8 @@ class Encoder:
         self._has_integrity = hasattr(self._mod, "MAVLink_gnss_integrity_message")
         self._first_alt_mm: int | None = None
         self._last_alert_t: dict[AlertCode, float] = {}
+        self._text_id = 0
+        """Id of the last chunked STATUSTEXT (1..65535, wrapping)."""
         self._intervals = {
             AlertCode(code): interval
             for code, interval in self.config.statustext_interval_overrides
@@ -365,11 +368,22 @@ class Encoder:
         # STATUSTEXT is read as ASCII by most ground stations (pymavlink among them):
         # spell the few non-ASCII signs the alerts use, drop anything else
         plain = alert.text.translate(_ASCII_SPELLING)
-        text = f"{ALERT_PREFIX}{code.value} {plain}".rstrip()[:STATUSTEXT_MAX_CHARS]
+        text = f"{ALERT_PREFIX}{code.value} {plain}".rstrip()
+        data = text.encode("ascii", "replace")[: STATUSTEXT_MAX_CHARS * STATUSTEXT_MAX_CHUNKS]
+        severity = int(alert.severity)
+        if len(data) <= STATUSTEXT_MAX_CHARS:
+            return [self._mod.MAVLink_statustext_message(severity, data, 0, 0)]
+        # MAVLink 2 chunking: one non-zero id, chunk_seq from 0; a chunk shorter than the
+        # field (an empty one after an exact multiple) ends the text
+        self._text_id = self._text_id % 0xFFFF + 1
+        chunks = [
+            data[i : i + STATUSTEXT_MAX_CHARS] for i in range(0, len(data), STATUSTEXT_MAX_CHARS)
+        ]
+        if len(chunks[-1]) == STATUSTEXT_MAX_CHARS:
+            chunks.append(b"")
         return [
-            self._mod.MAVLink_statustext_message(
-                int(alert.severity), text.encode("ascii", "replace"), 0, 0
-            )
+            self._mod.MAVLink_statustext_message(severity, chunk, self._text_id, seq)
+            for seq, chunk in enumerate(chunks)
         ]
 
     def _named_value(self, nv: NamedValue) -> list[Any]:
