@@ -309,6 +309,7 @@ class Tdprp:
         w = np.empty(n)
         iono = np.empty(n)
         for _ in range(cfg.iterations):
+            lat_lin, _, height_lin = ecef_to_geodetic(*x_lin)
             for i, key in enumerate(keys):
                 tr, s = self._tracks[key], by_key[key]
                 eph = self.ephemerides[(key[0], key[1])]
@@ -317,7 +318,7 @@ class Tdprp:
                     iono[i] = 0.5 * tr.cmc_fit()[0] * t
                 else:
                     iono[i] = 0.0
-                trop = saastamoinen_m(self._height, self._lat, el)
+                trop = saastamoinen_m(height_lin, lat_lin, el)
                 y[i] = (
                     tr.wavelength_m * s.phase_cyc
                     - tr.phase0_m
