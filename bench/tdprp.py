@@ -125,26 +125,38 @@ def main() -> int:
     print(f"{len(session.epochs)} epochs; ephemerides: {sorted(session.ephemerides)}")
     print(f"input rejections: {dict(session.rejected)}")
     print("\nT-D PRP against the RTK fixed track (position change from epoch 0), metres")
-    print(f"{'variant':44s} {'n':>4s} {'miss':>4s} {'H rms':>6s} {'H max':>6s} "
-          f"{'V rms':>6s} {'V max':>6s}  signals at end")
+    print(
+        f"{'variant':44s} {'n':>4s} {'miss':>4s} {'H rms':>6s} {'H max':>6s} "
+        f"{'V rms':>6s} {'V max':>6s}  signals at end"
+    )
     variants = [
-        ("L1 (GPS L1 + Galileo E1)", TdprpConfig(bands=L1_BANDS, iono_regression=False,
-                                                  step_residual_m=math.inf)),
+        (
+            "L1 (GPS L1 + Galileo E1)",
+            TdprpConfig(bands=L1_BANDS, iono_regression=False, step_residual_m=math.inf),
+        ),
         ("L1, epoch-to-epoch slip test", TdprpConfig(bands=L1_BANDS, iono_regression=False)),
-        ("L1, code-minus-carrier iono regression", TdprpConfig(
-            bands=L1_BANDS, iono_regression=True, step_residual_m=math.inf)),
-        ("every frequency", TdprpConfig(bands=ALL_BANDS, iono_regression=False,
-                                        step_residual_m=math.inf)),
-        ("every frequency, epoch-to-epoch slip test", TdprpConfig(
-            bands=ALL_BANDS, iono_regression=False)),
+        (
+            "L1, code-minus-carrier iono regression",
+            TdprpConfig(bands=L1_BANDS, iono_regression=True, step_residual_m=math.inf),
+        ),
+        (
+            "every frequency",
+            TdprpConfig(bands=ALL_BANDS, iono_regression=False, step_residual_m=math.inf),
+        ),
+        (
+            "every frequency, epoch-to-epoch slip test",
+            TdprpConfig(bands=ALL_BANDS, iono_regression=False),
+        ),
     ]
     for name, cfg in variants:
         est, points = track(session, cfg)
         s = score(session, points)
         last = next((tp for _, tp in reversed(points) if tp is not None), None)
         nsig = len(last.keys) if last else 0
-        print(f"{name:44s} {s.n:4d} {s.missing:4d} {s.h_rms:6.3f} {s.h_max:6.3f} "
-              f"{s.v_rms:6.3f} {s.v_max:6.3f}  {nsig}")
+        print(
+            f"{name:44s} {s.n:4d} {s.missing:4d} {s.h_rms:6.3f} {s.h_max:6.3f} "
+            f"{s.v_rms:6.3f} {s.v_max:6.3f}  {nsig}"
+        )
         print(f"{'':44s} exclusions: {dict(est.rejected)}")
 
     cfg = variants[4][1]
@@ -155,20 +167,26 @@ def main() -> int:
     up = -last.g_enu[:, 2]
     victim = last.keys[int(np.argmax(up))][:2]
     excluded_runs = {}
-    print(f"\nFIS-RAIM (window 10 s, slope > 0.015 m/s, RSS > 0.3^2 chi2(95%, m-2)) and "
-          f"standard code RAIM (sigma {CODE_SIGMA_M} m); fault on {victim} from "
-          f"t = {FAULT_START_S:.0f} s; set kept: {len(kept)} signals")
+    print(
+        f"\nFIS-RAIM (window 10 s, slope > 0.015 m/s, RSS > 0.3^2 chi2(95%, m-2)) and "
+        f"standard code RAIM (sigma {CODE_SIGMA_M} m); fault on {victim} from "
+        f"t = {FAULT_START_S:.0f} s; set kept: {len(kept)} signals"
+    )
     t0 = session.epochs[0].tow_s
     runs = {
         "untouched": session.epochs,
-        "ramp 4 cm/s": faults.inject(session.epochs, *victim, t0 + FAULT_START_S,
-                                     faults.ramp(0.04)),
-        "dither 1 m, 10 s": faults.inject(session.epochs, *victim, t0 + FAULT_START_S,
-                                          faults.dither(1.0, 10.0)),
+        "ramp 4 cm/s": faults.inject(
+            session.epochs, *victim, t0 + FAULT_START_S, faults.ramp(0.04)
+        ),
+        "dither 1 m, 10 s": faults.inject(
+            session.epochs, *victim, t0 + FAULT_START_S, faults.dither(1.0, 10.0)
+        ),
     }
     print("alert counts and first alerts from t = 30 s on, in every run")
-    print(f"{'run':18s} {'FIS alerts':>10s} {'FIS first (s after start)':>26s} "
-          f"{'slope/resid':>12s} {'std alerts':>10s} {'std first':>10s}")
+    print(
+        f"{'run':18s} {'FIS alerts':>10s} {'FIS first (s after start)':>26s} "
+        f"{'slope/resid':>12s} {'std alerts':>10s} {'std first':>10s}"
+    )
     for name, eps in runs.items():
         rows, est = raim_run(session, cfg, eps)
         excluded_runs[name] = {k: v for k, v in est.excluded.items() if k[:2] == victim}
@@ -183,9 +201,11 @@ def main() -> int:
         extra = ""
         if name.startswith("ramp") and fis_first is not None:
             extra = f"  (ramp then {0.04 * fis_first:.2f} m)"
-        print(f"{name:18s} {n_fis:10d} {fmt(fis_first):>26s} "
-              f"{fmt(slope_first) + '/' + fmt(resid_first):>12s} {n_std:10d} "
-              f"{fmt(std_first):>10s}{extra}")
+        print(
+            f"{name:18s} {n_fis:10d} {fmt(fis_first):>26s} "
+            f"{fmt(slope_first) + '/' + fmt(resid_first):>12s} {n_std:10d} "
+            f"{fmt(std_first):>10s}{extra}"
+        )
     for name, ex in excluded_runs.items():
         print(f"{name}: signals of {victim} excluded by the slip tests: {ex or 'none'}")
     return 0

@@ -24,7 +24,9 @@ def elevation_rad(rx_ecef_m: FloatArray, sat_ecef_m: FloatArray) -> float:
     return math.asin(max(-1.0, min(1.0, float(enu[2]))))
 
 
-def saastamoinen_m(height_m: float, lat_rad: float, elevation: float, humidity: float = 0.7) -> float:
+def saastamoinen_m(
+    height_m: float, lat_rad: float, elevation: float, humidity: float = 0.7
+) -> float:
     """Tropospheric slant delay: Saastamoinen's model with its own zenith-angle mapping.
 
     Standard atmosphere for pressure and temperature at ``height_m`` (as RTKLIB's

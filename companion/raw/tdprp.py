@@ -111,8 +111,9 @@ class TrackPoint:
     """The solution at one epoch, with the linear system it came from (for RAIM).
 
     ``g_enu`` rows are [−1_kᵀ (ENU at x0), one-hot clock column] (one clock, or one per
-    (system, band) with ``clock_per_band``); ``clock_change_m`` is the first clock's. ``y_m`` is the observation minus the
-    computed change at the final linearisation point; ``w`` the weights.
+    (system, band) with ``clock_per_band``); ``clock_change_m`` is the first clock's.
+    ``y_m`` is the observation minus the computed change at the final linearisation
+    point; ``w`` the weights.
     """
 
     tow_s: float

@@ -38,22 +38,34 @@ SYSTEMS = {0: "GPS", 1: "SBAS", 2: "Galileo", 3: "BeiDou", 5: "QZSS", 6: "GLONAS
 
 BANDS = {
     "GPS": {0: "L1", 3: "L2", 4: "L2", 6: "L5", 7: "L5"},
-    "Galileo": {0: "E1", 1: "E1", 3: "E5a", 4: "E5a", 5: "E5b", 6: "E5b", 8: "E6", 9: "E6", 10: "E6"},
+    "Galileo": {
+        0: "E1",
+        1: "E1",
+        3: "E5a",
+        4: "E5a",
+        5: "E5b",
+        6: "E5b",
+        8: "E6",
+        9: "E6",
+        10: "E6",
+    },
 }
 """UBX sigId -> band. GPS: L1 C/A; L2 CL, CM; L5 I, Q. Galileo: E1 C, B; E5a I, Q; E5b I,
 Q; E6 B, C, A."""
 
 
 def system_name(gnss_id: object) -> str:
-    return SYSTEMS.get(int(gnss_id), str(gnss_id)) if str(gnss_id).isdigit() else str(gnss_id)
+    text = str(gnss_id)
+    return SYSTEMS.get(int(text), text) if text.isdigit() else text
 
 
 def band_name(system: str, sig_id: object) -> str:
     """The band of a signal (``"L1"``, ``"E5a"``...); ``"<system>-<sigId>"`` if unknown."""
     table = BANDS.get(system, {})
-    if str(sig_id).isdigit() and int(sig_id) in table:
-        return table[int(sig_id)]
-    return f"{system}-{sig_id}"
+    text = str(sig_id)
+    if text.isdigit() and int(text) in table:
+        return table[int(text)]
+    return f"{system}-{text}"
 
 
 def rawx_to_epoch(msg: Any) -> RawEpoch:

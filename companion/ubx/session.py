@@ -21,7 +21,7 @@ from companion.raw.geometry import enu_rotation
 from companion.raw.lnav import Ephemeris
 from companion.raw.obs import RawEpoch
 from companion.raw.orbit import FloatArray
-from companion.ubx.pos import read_pos
+from companion.ubx.pos import PosRow, read_pos
 from companion.ubx.reader import read_file
 
 
@@ -65,9 +65,9 @@ def load_session(ubx_path: str, pos_path: str, start_index: int = 0) -> Session:
     if first is None:
         raise ValueError("the reference has no row at epoch 0")
 
-    def ecef(r: object) -> FloatArray:
-        lat, lon = math.radians(r.lat_deg), math.radians(r.lon_deg)  # type: ignore[attr-defined]
-        return np.array(geodetic_to_ecef_m(lat, lon, r.height_m - geoid_sep))  # type: ignore[attr-defined]
+    def ecef(r: PosRow) -> FloatArray:
+        lat, lon = math.radians(r.lat_deg), math.radians(r.lon_deg)
+        return np.asarray(geodetic_to_ecef_m(lat, lon, r.height_m - geoid_sep), dtype=float)
 
     x0 = ecef(first)
     r_enu = enu_rotation(math.radians(first.lat_deg), math.radians(first.lon_deg))

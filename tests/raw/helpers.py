@@ -62,7 +62,19 @@ def simulate_epoch(
         rate = float(u @ (rotate_earth(st.vel_ecef_mps, tau) - v_rx))
         rate += clock_drift_mps - C_MPS * st.clock_drift_sps
         sigs.append(
-            SignalObs(system, sv, band, pr, (pr + noise) / wl + 1000.0, -rate / wl, 64.5,
-                      45.0, True, True, True, False)
+            SignalObs(
+                system,
+                sv,
+                band,
+                pr,
+                (pr + noise) / wl + 1000.0,
+                -rate / wl,
+                64.5,
+                45.0,
+                True,
+                True,
+                True,
+                False,
+            )
         )
     return RawEpoch(week=week, tow_s=t_true_s + clock_m / C_MPS, signals=tuple(sigs))

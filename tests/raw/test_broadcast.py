@@ -59,8 +59,7 @@ def test_doppler_matches_the_computed_range_rate() -> None:
         key = (sig.system, sig.sv)
         if sig.band not in ("L1", "E1") or key not in s.ephemerides:
             continue
-        st, _ = sat_state_at_reception(s.ephemerides[key], ep.tow_s, sig.pseudorange_m,
-                                       s.x0_ecef_m)
+        st, _ = sat_state_at_reception(s.ephemerides[key], ep.tow_s, sig.pseudorange_m, s.x0_ecef_m)
         u = st.pos_ecef_m - s.x0_ecef_m
         u /= np.linalg.norm(u)
         rate = float(u @ st.vel_ecef_mps) - C_MPS * st.clock_drift_sps

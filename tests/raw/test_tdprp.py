@@ -27,8 +27,17 @@ def _simulated(seconds: float = 60.0, rate_hz: float = 4.0, **kw):
         enu = np.array([1.5, 0.0, 0.2]) * max(t - 10.0, 0.0)
         x = s.x0_ecef_m + r_enu.T @ enu
         clock = -462_000.0 - 60.0 * t  # the walk receiver's clock: 1.5 ms, -200 ppb
-        epochs.append(simulate_epoch(s.ephemerides, t0 + t, x, clock, **kw,
-                                     rx_vel_ecef_mps=r_enu.T @ vel, clock_drift_mps=-60.0))
+        epochs.append(
+            simulate_epoch(
+                s.ephemerides,
+                t0 + t,
+                x,
+                clock,
+                **kw,
+                rx_vel_ecef_mps=r_enu.T @ vel,
+                clock_drift_mps=-60.0,
+            )
+        )
         truth.append(enu)
     return s, epochs, truth
 
@@ -38,7 +47,7 @@ def test_exact_on_simulated_observations() -> None:
     est = Tdprp(s.ephemerides, s.x0_ecef_m, CFG)
     assert len(est.start(epochs[0])) >= 6
     worst = 0.0
-    for ep, enu in zip(epochs[1:], truth[1:]):
+    for ep, enu in zip(epochs[1:], truth[1:], strict=True):
         tp = est.step(ep)
         assert tp is not None
         worst = max(worst, float(np.linalg.norm(tp.delta_enu_m - enu)))
@@ -71,8 +80,9 @@ def test_lost_signal_leaves_the_set_for_good() -> None:
     keys = est.start(epochs[0])
     gone = keys[0]
     ep = epochs[3]
-    cut = type(ep)(ep.week, ep.tow_s, tuple(x for x in ep.signals
-                                             if (x.system, x.sv, x.band) != gone))
+    cut = type(ep)(
+        ep.week, ep.tow_s, tuple(x for x in ep.signals if (x.system, x.sv, x.band) != gone)
+    )
     assert gone not in est.step(cut).keys  # type: ignore[union-attr]
     assert gone not in est.step(epochs[4]).keys  # type: ignore[union-attr]
     assert est.excluded[gone] == "lost or flagged"
