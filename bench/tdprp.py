@@ -134,7 +134,10 @@ def main() -> int:
             "L1 (GPS L1 + Galileo E1)",
             TdprpConfig(bands=L1_BANDS, iono_regression=False, step_residual_m=math.inf),
         ),
-        ("L1, epoch-to-epoch slip test", TdprpConfig(bands=L1_BANDS, iono_regression=False)),
+        (
+            "L1, epoch-to-epoch slip test",
+            TdprpConfig(bands=L1_BANDS, iono_regression=False, step_residual_m=0.04),
+        ),
         (
             "L1, code-minus-carrier iono regression",
             TdprpConfig(bands=L1_BANDS, iono_regression=True, step_residual_m=math.inf),
@@ -145,7 +148,7 @@ def main() -> int:
         ),
         (
             "every frequency, epoch-to-epoch slip test",
-            TdprpConfig(bands=ALL_BANDS, iono_regression=False),
+            TdprpConfig(bands=ALL_BANDS, iono_regression=False, step_residual_m=0.04),
         ),
     ]
     for name, cfg in variants:

@@ -52,6 +52,7 @@ APPLICATION = frozenset(
         "console",
         "deploy",
         "evaluate",
+        "inspection",
         "notify",
         "params",
         "pipeline",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import math
 
 from pyubx2 import UBXReader
 
@@ -48,3 +49,30 @@ def test_reference_rows_and_malformed_lines(tmp_path) -> None:
     broken.write_text(POS.read_text().replace("1601.4", "x601.4", 1))
     rows2, bad2 = read_pos(str(broken))
     assert bad2 == 1 and len(rows2) == 160
+
+
+def test_inspect_writes_the_track(tmp_path) -> None:
+    import csv
+
+    from companion.cli import main
+
+    out = tmp_path / "track.csv"
+    assert main(["inspect", str(UBX), "--output", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert len(rows) == 160
+    assert list(rows[0]) == [
+        "gps_tow_s", "lat_deg", "lon_deg", "alt_m", "e_m", "n_m", "u_m",
+        "n_sats", "slope_stat", "residual_stat", "alert",
+    ]  # fmt: skip
+    assert abs(float(rows[0]["e_m"])) < 0.01 and int(rows[0]["n_sats"]) >= 5
+    # the static start: centimetres; then the walk moves metres away
+    assert math.hypot(float(rows[40]["e_m"]), float(rows[40]["n_m"])) < 0.05
+    assert math.hypot(float(rows[-1]["e_m"]), float(rows[-1]["n_m"])) > 5.0
+    assert abs(float(rows[0]["alt_m"]) - 1580.05) < 0.05
+
+
+def test_inspect_bad_reference_is_one_line(capsys) -> None:
+    from companion.cli import main
+
+    assert main(["inspect", str(UBX), "-o", "/dev/null", "--reference", "91,0,0"]) == 1
+    assert "out of range" in capsys.readouterr().err

@@ -43,8 +43,9 @@ class TdprpConfig:
     elevation_mask_deg: float = 10.0
     min_cn0_dbhz: float = 28.0
     min_lock_s: float = 1.0
-    iono_regression: bool = True
-    """Single frequency: ΔI from each signal's code-minus-carrier regression (the paper)."""
+    iono_regression: bool = False
+    """ΔI from each signal's code-minus-carrier regression (the paper); off by default:
+    on the real walk the code's multipath made it far worse (docs/raw.md)."""
     cmc_sigma_m: float = 1.0
     """σ of the code-minus-carrier residual M about its line (code noise and multipath)."""
     cmc_exclusion_prob: float = 1e-3
@@ -55,9 +56,10 @@ class TdprpConfig:
     """One receiver clock change per (system, band) instead of one for all signals."""
     doppler_slip_cyc: float = 1.0
     """A phase step further than this from the integrated Doppler is a cycle slip."""
-    step_residual_m: float = 0.04
+    step_residual_m: float = math.inf
     """A residual of the epoch-to-epoch phase solution above this is a slip (or a jump
-    of the phase's error): the signal leaves the set."""
+    of the phase's error): the signal leaves the set. Off by default; 0.04 m helped on
+    the walk with every frequency and hurt with L1 alone (docs/raw.md)."""
 
 
 @dataclass
