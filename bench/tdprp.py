@@ -41,6 +41,7 @@ from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint  # noqa: E402
 from companion.ubx.session import Session, load_session  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+CUT = ROOT / "tests" / "data" / "walk_0827"
 WALK = ROOT.parent / "shared" / "realdata" / "gnss_imu" / "walk_0827"
 FAULT_START_S = 30.0
 CODE_SIGMA_M = 5.0
@@ -113,9 +114,130 @@ def first_alert(rows, column: int, after_s: float) -> float | None:
     return None
 
 
+# --------------------------------------------------------------------------- approaches
+# A simulated inspection flight in a runway frame (along, cross, up): take-off roll from
+# the surveyed threshold (epoch 0), outbound climb, two right turns, downwind, and a
+# 3 deg final to the threshold; speeds and heights change smoothly (no Doppler step).
+V = 70.0
+ROLL_ACC = 2.0
+R_TURN = 1000.0
+OUT = 5000.0
+FINAL = 9000.0
+GS = math.tan(math.radians(3.0))
+H = 8000.0 * GS
+
+
+def smooth(x):
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def runway_point(t):
+    """(along, cross, up) in the runway frame at time t: roll, outbound climb, right turn,
+    downwind, right turn, final descent on 3 deg to the threshold."""
+    s_roll = V * V / (2 * ROLL_ACC)
+    t_roll = V / ROLL_ACC
+    if t < t_roll:
+        return np.array([0.5 * ROLL_ACC * t * t, 0.0, 0.0])
+    s = s_roll + V * (t - t_roll)
+    segs = [
+        ("out", OUT),
+        ("turn1", math.pi * R_TURN),
+        ("down", OUT + s_roll + FINAL),
+        ("turn2", math.pi * R_TURN),
+        ("final", FINAL),
+    ]
+    s -= s_roll
+    for name, length in segs:
+        if s <= length or name == "final":
+            break
+        s -= length
+    a_end = s_roll + OUT
+    if name == "out":
+        a = s_roll + s
+        return np.array([a, 0.0, H * smooth(s / 3000.0)])
+    if name == "turn1":
+        ang = s / R_TURN
+        return np.array([a_end + R_TURN * math.sin(ang), R_TURN * (1 - math.cos(ang)), H])
+    if name == "down":
+        return np.array([a_end - s, 2 * R_TURN, H])
+    a_start = a_end - (OUT + s_roll + FINAL)
+    if name == "turn2":
+        ang = s / R_TURN
+        return np.array([a_start - R_TURN * math.sin(ang), R_TURN * (1 + math.cos(ang)), H])
+    a = a_start + min(s, FINAL)
+    x = max(-a, 0.0)
+    h = GS * x if x <= 7000.0 else GS * (x - (x - 7000.0) ** 2 / 4000.0)
+    return np.array([a, 0.0, h])
+
+
+def duration():
+    return (
+        V / ROLL_ACC
+        + (OUT + 2 * math.pi * R_TURN + OUT + V * V / (2 * ROLL_ACC) + FINAL + FINAL) / V
+    )
+
+
+CRITICAL_S = 30.0
+"""The critical region: the last 30 s of the final (2.1 km to the threshold)."""
+
+
+def approaches(session: Session, runs: int, seed: int) -> None:
+    from companion.nav.frames import ecef_to_geodetic
+    from companion.raw.geometry import enu_rotation
+    from companion.raw.simulate import RawSimConfig, simulate_flight
+
+    x0 = session.x0_ecef_m
+    lat, lon, _ = ecef_to_geodetic(*x0)
+    r_enu = enu_rotation(lat, lon)
+    hd = math.radians(30.0)
+    m = np.array([[math.sin(hd), math.cos(hd), 0.0], [math.cos(hd), -math.sin(hd), 0.0],
+                  [0.0, 0.0, 1.0]])  # fmt: skip
+
+    def path(t: float) -> np.ndarray:
+        return x0 + r_enu.T @ (m.T @ runway_point(t))
+
+    sim_cfg = RawSimConfig(slip_probability_per_s=0.0005)
+    cfg = TdprpConfig(bands=L1_BANDS, iono_regression=True)
+    cross, vert, dropped = [], [], 0
+    for k in range(runs):
+        rng = np.random.default_rng(seed + k)
+        eps, truth = simulate_flight(
+            session.ephemerides, session.epochs[0].tow_s, duration(), path, rng, sim_cfg
+        )
+        est = Tdprp(session.ephemerides, x0, cfg)
+        est.start(eps[0])
+        t_end = eps[-1].tow_s
+        for ep, x in zip(eps[1:], truth[1:], strict=True):
+            tp = est.step(ep)
+            if tp is None:
+                continue
+            if t_end - ep.tow_s <= CRITICAL_S:
+                e = m @ (r_enu @ (tp.pos_ecef_m - x))
+                cross.append(abs(e[1]))
+                vert.append(abs(e[2]))
+        dropped += len(est.excluded)
+        print(f"  approach {k + 1}/{runs}", end="\r", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    print(
+        f"\nSimulated approaches: {runs} seeds from {seed}, {duration():.0f} s from the "
+        f"surveyed threshold, L1 with the code-minus-carrier regression; code 0.5 m, "
+        f"carrier 5 mm, ionospheric drift 2 mm/s (1 sigma), tropospheric zenith error "
+        f"3 cm, slips 5e-4/s per satellite ({dropped} signals left the set)"
+    )
+    print(
+        f"critical region (last {CRITICAL_S:.0f} s): 95 % |vertical| "
+        f"{np.percentile(vert, 95):.3f} m, 95 % |cross-track| {np.percentile(cross, 95):.3f}"
+        f" m ({len(vert)} samples); Kim, Walter and Powell: 0.18 / 0.17 m with the "
+        f"reference's 0.15 m (95 %) included, T-D PRP alone RMS 0.061 / 0.041 m"
+    )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(WALK), help="folder with gnss_1730.ubx and .pos")
+    ap.add_argument("--approaches", type=int, default=20, help="simulated approaches (0: none)")
+    ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     ubx, pos = Path(args.data) / "gnss_1730.ubx", Path(args.data) / "gnss_1730_sf.pos"
     if not ubx.is_file() or not pos.is_file():
@@ -211,6 +333,8 @@ def main() -> int:
         )
     for name, ex in excluded_runs.items():
         print(f"{name}: signals of {victim} excluded by the slip tests: {ex or 'none'}")
+    if args.approaches:
+        approaches(session, args.approaches, args.seed)
     return 0
 
 
