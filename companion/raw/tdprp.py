@@ -158,7 +158,7 @@ class Tdprp:
         self._x_lin = self.x0_ecef_m.copy()
         self._gof_limit: dict[int, float] = {}
 
-    # ------------------------------------------------------------------ helpers
+    # ------------------------------------------------------------------ internals
     def _wavelength(self, s: SignalObs) -> float | None:
         hz = SIGNAL_HZ.get(s.band)
         return None if hz is None else C_MPS / hz
