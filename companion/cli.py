@@ -1,4 +1,5 @@
-"""``companion``: run | replay | evaluate | simulate | console | config-template | install-unit.
+"""``companion``: run | replay | evaluate | simulate | console | config-template | install-unit
+| inspect.
 
 The only place that configures logging and prints. Every expected failure
 (bad file, bad configuration, unknown scenario) is one line on stderr and a
@@ -147,6 +148,18 @@ def _cmd_console(args: argparse.Namespace) -> int:
     return run_console(args.master, once=args.once, duration_s=args.duration)
 
 
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from companion.inspection import inspect_file, parse_reference
+
+    reference = None if args.reference is None else parse_reference(args.reference)
+    if not args.input.is_file():
+        raise FileNotFoundError(f"{args.input}: no such file")
+    summary = inspect_file(args.input, args.output, args.start_s, reference)
+    print(summary.to_text())
+    print(f"track: {args.output}")
+    return 0
+
+
 def _cmd_config_template(args: argparse.Namespace) -> int:
     from companion.config import template
     from companion.presets import grade_template
@@ -233,6 +246,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("config-template", help="print every configuration key with defaults")
     p.add_argument("--grade", help="print the values of this IMU grade's preset (mems, tactical)")
     p.set_defaults(func=_cmd_config_template)
+
+    p = sub.add_parser(
+        "inspect", help="carrier-phase track (T-D PRP) with FIS-RAIM from a raw .ubx file"
+    )
+    p.add_argument("input", type=Path, help="u-blox recording with RXM-RAWX and RXM-SFRBX")
+    p.add_argument("--output", "-o", type=Path, required=True, help="track CSV")
+    p.add_argument("--start-s", type=float, help="epoch 0 this long after the first epoch, s")
+    p.add_argument("--reference", help="epoch 0's LAT,LON,ALT (deg, deg, m above the ellipsoid)")
+    p.set_defaults(func=_cmd_inspect)
 
     p = sub.add_parser("install-unit", help="write the systemd unit (--print: to stdout)")
     p.add_argument("--print", dest="print_only", action="store_true", help="print; write nothing")

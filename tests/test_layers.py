@@ -10,11 +10,13 @@ is in ``nav``; ``companion/__init__.py`` is the package root, ``""``).
 The rule, lowest first (docs/architecture.md):
 
     types, ranges  <  nav  <  integrity  <  engine
+    raw (raw-observation positioning): types, ranges and nav
     mavlink: types, ranges and nav only (never the engine or integrity)
+    ubx (the raw receiver's edge): types, ranges, nav and raw
     everything else (pipeline, service, replay, cli, ...): above all of these
 
-and the pure core (root, types, ranges, nav, integrity, engine) imports no I/O, clock
-or MAVLink library (:data:`CORE_MAY_NOT_IMPORT`).
+and the pure core (root, types, ranges, nav, raw, integrity, engine) imports no I/O,
+clock, MAVLink or UBX library (:data:`CORE_MAY_NOT_IMPORT`).
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ MAY_IMPORT: dict[str, frozenset[str]] = {
     "integrity": BASE | {"nav", "integrity"},
     "engine": BASE | {"nav", "integrity", "engine"},
     "mavlink": BASE | {"nav", "mavlink"},
+    "raw": BASE | {"nav", "raw"},
+    "ubx": BASE | {"nav", "raw", "ubx"},
 }
 """Layer -> the layers its modules may import. The rule table: keep it small."""
 
@@ -48,6 +52,7 @@ APPLICATION = frozenset(
         "console",
         "deploy",
         "evaluate",
+        "inspection",
         "notify",
         "params",
         "pipeline",
@@ -61,11 +66,11 @@ APPLICATION = frozenset(
 """Layers above every layer of :data:`MAY_IMPORT`: they may import any of them (and each
 other). A new top-level module or package must be put in one of the two tables."""
 
-CORE = ("", "types", "ranges", "nav", "integrity", "engine")
+CORE = ("", "types", "ranges", "nav", "raw", "integrity", "engine")
 """The pure core: no I/O, no clock, no MAVLink."""
 
 CORE_MAY_NOT_IMPORT = frozenset(
-    {"asyncio", "matplotlib", "pymavlink", "serial", "signal", "socket", "time"}
+    {"asyncio", "matplotlib", "pymavlink", "pyubx2", "serial", "signal", "socket", "time"}
 )
 """Top-level libraries the core never imports (time comes from the samples' ``t_s``)."""
 
