@@ -551,8 +551,10 @@ def _plan_realism(
     bursts = w(rng_w, t0, t1, rl.burst_per_h, rl.burst_s, rl.burst_s)
     baro_do = w(rng_w, t0, t1, rl.baro_dropout_per_h, rl.baro_dropout_s, rl.baro_dropout_s)
     events = list(sc.events)
+    lat = sc.gnss_latency_s  # a dropout loses the fixes whose messages it would carry
     for rid in (0, 1) if sc.second_receiver else (0,):
-        events += [Event("outage", a, b, rid) for a, b in [*dropouts, *gaps]]
+        events += [Event("outage", a - lat, b - lat, rid) for a, b in dropouts]
+        events += [Event("outage", a, b, rid) for a, b in gaps]
         events += [Event("downgrade", a, b, rid, {"mode": "none"}) for a, b in nofix]
     sc2 = dataclasses.replace(sc, events=tuple(events))
     return _RealismPlan(

@@ -6,7 +6,7 @@ SCALED_PRESSURE, which the decoder does not turn into samples, is read from the
 raw messages. Every statistic is None where the log does not show it (no rest
 period, no GNSS, no barometer).
 
-Rest: IMU samples in a 2 s window whose gyro norm stays below 0.05 rad/s and whose
+Rest: IMU samples in a 2 s window (at least 6 samples) whose gyro norm stays below 0.05 rad/s and whose
 specific-force norm varies by less than 0.3 m/s^2 (standard deviation), i.e. the
 vehicle stands still, engines on or off.
 """
@@ -23,10 +23,15 @@ import numpy as np
 
 from companion.mavlink.decode.decoder import Decoder
 from companion.mavlink.tlog import read_tlog
-from companion.types import AttitudeSample, FixType, GnssFix, ImuSample
+from companion.types import AttitudeSample, AutopilotSolution, FixType, GnssFix, ImuSample
 
 G0_MPS2 = 9.80665
 REST_WINDOW_S = 2.0
+REST_SPEED_MPS = 0.5
+"""...and, where the autopilot's velocity (GLOBAL_POSITION_INT) or a 3D fix is known within
+0.5 s, the speed stays below this (a smooth simulated cruise is otherwise still)."""
+REST_MIN_SAMPLES = 6
+"""A rest window spans at least this many IMU samples (2 s hold 2 samples at 1 Hz)."""
 REST_GYRO_RADPS = 0.05
 REST_ACC_STD_MPS2 = 0.3
 _DATA_STREAMS = frozenset(
@@ -63,21 +68,27 @@ def _euler_to_mat_nb(r: np.ndarray, p: np.ndarray, y: np.ndarray) -> np.ndarray:
     return m
 
 
-def _rest_mask(t: np.ndarray, acc: np.ndarray, gyro: np.ndarray) -> np.ndarray:
+def _rest_mask(
+    t: np.ndarray, acc: np.ndarray, gyro: np.ndarray, speed: tuple[np.ndarray, np.ndarray]
+) -> np.ndarray:
     """True for IMU samples inside a still window (see the module doc)."""
+    ts, vs = speed
     n = len(t)
     mask = np.zeros(n, bool)
     if n < 3:
         return mask
     gn = np.linalg.norm(gyro, axis=1)
     an = np.linalg.norm(acc, axis=1)
-    edges = np.arange(t[0], t[-1] + REST_WINDOW_S, REST_WINDOW_S)
+    win = max(REST_WINDOW_S, REST_MIN_SAMPLES * float(np.median(np.diff(t))))
+    edges = np.arange(t[0], t[-1] + win, win)
     idx = np.searchsorted(t, edges)
     for a, b in zip(idx[:-1], idx[1:], strict=True):
         if b - a < 3:
             continue
         if gn[a:b].max() < REST_GYRO_RADPS and an[a:b].std() < REST_ACC_STD_MPS2:
-            mask[a:b] = True
+            i, k = np.searchsorted(ts, [t[a] - 0.5, t[b - 1] + 0.5])
+            if k == i or vs[i:k].max() < REST_SPEED_MPS:
+                mask[a:b] = True
     return mask
 
 
@@ -95,6 +106,7 @@ def log_stats(name: str, path: Path) -> LogStats:
     dec = Decoder()
     imu: dict[tuple[int, str], list[ImuSample]] = collections.defaultdict(list)
     att: list[AttitudeSample] = []
+    spd: list[tuple[float, float]] = []
     gnss: list[GnssFix] = []
     baro_t: list[float] = []
     baro_hpa: list[float] = []
@@ -117,6 +129,10 @@ def log_stats(name: str, path: Path) -> LogStats:
                 att.append(s)
             elif isinstance(s, GnssFix) and s.receiver_id == 0:
                 gnss.append(s)
+                if s.fix_type >= FixType.FIX_3D:
+                    spd.append((s.t_s, s.ground_speed_mps))
+            elif isinstance(s, AutopilotSolution):
+                spd.append((s.t_s, float(np.linalg.norm(s.vel_ned_mps))))
     out: dict[str, float | None] = {}
     duration = (t_last - t_first) if t_first is not None and t_last is not None else 0.0
     out["duration_s"] = duration
@@ -124,14 +140,18 @@ def log_stats(name: str, path: Path) -> LogStats:
     # the fastest IMU stream
     main = max(imu.values(), key=len) if imu else []
     out["imu_units"] = float(len(imu))
-    out.update(_imu_stats(main, att))
-    out.update(_gnss_stats(gnss, main))
+    sp = np.array(sorted(spd)).reshape(-1, 2)
+    speed = (sp[:, 0], sp[:, 1])
+    out.update(_imu_stats(main, att, speed))
+    out.update(_gnss_stats(gnss, main, speed))
     out.update(_stream_stats(rx_by_type, duration, main))
     out.update(_baro_stats(np.array(baro_t), np.array(baro_hpa)))
     return LogStats(name, out)
 
 
-def _imu_stats(imu: list[ImuSample], att: list[AttitudeSample]) -> dict[str, float | None]:
+def _imu_stats(
+    imu: list[ImuSample], att: list[AttitudeSample], speed: tuple[np.ndarray, np.ndarray]
+) -> dict[str, float | None]:
     out: dict[str, float | None] = dict.fromkeys(
         ("imu_rate_hz", "imu_dt_jitter_ms", "imu_t_backwards_pct", "rest_fraction",
          "rest_sf_resid_mps2", "rest_tilt_disagree_deg", "rest_acc_noise_mps2",
@@ -155,7 +175,7 @@ def _imu_stats(imu: list[ImuSample], att: list[AttitudeSample]) -> dict[str, flo
     normal = dt[dt < 5.0 * med]
     # robust jitter: median absolute deviation of the interval, as a sigma, ms
     out["imu_dt_jitter_ms"] = float(1.4826 * np.median(np.abs(normal - med)) * 1e3)
-    rest = _rest_mask(t, acc, gyro)
+    rest = _rest_mask(t, acc, gyro, speed)
     out["rest_fraction"] = float(rest.mean())
     an = np.linalg.norm(acc, axis=1)
     if rest.sum() >= 10:
@@ -186,7 +206,9 @@ def _imu_stats(imu: list[ImuSample], att: list[AttitudeSample]) -> dict[str, flo
     return out
 
 
-def _gnss_stats(gnss: list[GnssFix], imu: list[ImuSample]) -> dict[str, float | None]:
+def _gnss_stats(
+    gnss: list[GnssFix], imu: list[ImuSample], speed: tuple[np.ndarray, np.ndarray]
+) -> dict[str, float | None]:
     keys = ("gnss_rate_hz", "gnss_nofix_pct", "gnss_garbage_pct", "gnss_2d3d_flaps_per_h",
             "gnss_rest_speed_mps", "gnss_hacc_over_scatter", "gnss_sats_std", "gnss_hdop_std")  # fmt: skip
     out: dict[str, float | None] = dict.fromkeys(keys, None)
@@ -220,7 +242,7 @@ def _gnss_stats(gnss: list[GnssFix], imu: list[ImuSample]) -> dict[str, float | 
         ti = ti[o]
         acc = np.array([s.acc_b_mps2 for s in imu])[o]
         gyro = np.array([s.gyro_b_radps for s in imu])[o]
-        rest = _rest_mask(ti, acc, gyro)
+        rest = _rest_mask(ti, acc, gyro, speed)
         j = np.clip(np.searchsorted(ti, t), 0, len(ti) - 1)
         at_rest = rest[j] & good & (np.abs(ti[j] - t) < 0.5)
         if at_rest.sum() >= 10:
@@ -267,8 +289,7 @@ def _baro_stats(t: np.ndarray, p_hpa: np.ndarray) -> dict[str, float | None]:
     out: dict[str, float | None] = {"baro_noise_hpa": None, "baro_rate_hz": None}
     if len(t) < 20:
         return out
-    o = np.argsort(t, kind="stable")
-    t, p = t[o], p_hpa[o]
+    p = p_hpa  # in receive order: a reboot restarts the clock, sorting would interleave
     d = np.diff(t)
     d = d[d > 0]
     out["baro_rate_hz"] = 1.0 / float(np.median(d))
