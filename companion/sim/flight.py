@@ -621,6 +621,9 @@ class _GnssRealism:
 
 GARBAGE_SIGMA_M = 3000.0
 """Garbage coordinates during no-fix: a slowly wandering offset of this size per axis, m."""
+GARBAGE_VERTICAL_FRACTION = 0.03
+"""...and 3 % of that vertically (~90 m): log171's garbage passes a decoder's
+altitude check."""
 
 
 def _gnss_realism(plan: _RealismPlan, t_fix: FloatArray, specs: list[Any]) -> _GnssRealism:
@@ -631,6 +634,7 @@ def _gnss_realism(plan: _RealismPlan, t_fix: FloatArray, specs: list[Any]) -> _G
     nofix = np.array([sp.fix_type < FixType.FIX_2D for sp in specs], bool).reshape(n)
     garbage = nofix & rl.gnss_garbage
     gar = gauss_markov(rng, t_fix, GARBAGE_SIGMA_M, 60.0, 3) * garbage[:, None]
+    gar[:, 2] *= GARBAGE_VERTICAL_FRACTION
     fac = np.exp(gauss_markov(rng, t_fix, rl.gnss_acc_log_sigma, 120.0, 1)[:, 0])
     ds = gauss_markov(rng, t_fix, rl.gnss_sats_sigma, 60.0, 1)[:, 0]
     dh = gauss_markov(rng, t_fix, rl.gnss_hdop_sigma, 60.0, 1)[:, 0]

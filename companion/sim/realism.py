@@ -161,10 +161,10 @@ class Realism:
 # --------------------------------------------------------------------------- profiles
 
 _ARDU_COPTER = Realism(
-    attitude_trim_deg=1.4, attitude_tilt_sigma_deg=0.4, attitude_yaw_sigma_deg=3.0,
+    attitude_trim_deg=1.4, attitude_tilt_sigma_deg=0.25, attitude_yaw_sigma_deg=3.0,
     attitude_tau_s=120.0, attitude_lag_s=0.05, autopilot_pos_sigma_m=2.0,
     autopilot_lag_s=0.1,
-    acc_bias_mps2=0.15, acc_scale_sigma=0.005, misalign_sigma_rad=2e-3,
+    acc_bias_mps2=0.1, acc_scale_sigma=0.005, misalign_sigma_rad=2e-3,
     gyro_bias_radps=0.5 * _DEG, gyro_rw_radps_rts=2e-4, temp_rise_c=15.0,
     acc_temp_mps2_per_c=0.004, gyro_temp_radps_per_c=0.0003,
     acc_noise_mps2=0.1, gyro_noise_radps=0.003,
@@ -197,7 +197,7 @@ _PROFILES: dict[str, tuple[Realism, dict[str, Any]]] = {
     ),  # fmt: skip
     "plane": (
         dataclasses.replace(
-            _ARDU_COPTER, attitude_trim_deg=1.3, vibration_mps2=25.0, vibration_hz=90.0,
+            _ARDU_COPTER, attitude_trim_deg=1.3, acc_noise_mps2=0.15, vibration_mps2=25.0, vibration_hz=90.0,
             vibration_broadband_mps2=1.2, stamp_jitter_s=0.0015, gnss_nofix_start_s=0.4,
             gnss_garbage=False, gnss_gap_per_h=4.0, gnss_gap_min_s=0.5, gnss_gap_max_s=0.9,
             dropout_per_h=0.0,
@@ -208,15 +208,15 @@ _PROFILES: dict[str, tuple[Realism, dict[str, Any]]] = {
     ),  # fmt: skip
     "px4": (
         Realism(
-            attitude_trim_deg=0.07, attitude_tilt_sigma_deg=0.05, attitude_yaw_sigma_deg=1.0,
+            attitude_trim_deg=0.07, attitude_tilt_sigma_deg=0.03, attitude_yaw_sigma_deg=1.0,
             attitude_lag_s=0.01, autopilot_pos_sigma_m=1.0, acc_bias_mps2=0.005,
             acc_scale_sigma=0.002, misalign_sigma_rad=1e-3, gyro_bias_radps=0.1 * _DEG,
             gyro_rw_radps_rts=5e-5, temp_rise_c=10.0, acc_temp_mps2_per_c=0.0005,
-            acc_noise_mps2=0.02, gyro_noise_radps=0.002, vibration_mps2=5.0,
+            acc_noise_mps2=0.015, gyro_noise_radps=0.002, vibration_mps2=5.0,
             vibration_broadband_mps2=0.1, vibration_gyro_ratio_radps_per_mps2=0.15,
             vibration_hz=140.0, filter_hz=30.0, gnss_vel_bias_mps=0.05,
             dropout_per_h=60.0, dropout_min_s=0.07, dropout_max_s=0.14,
-            gnss_acc_log_sigma=0.3, gnss_sats_sigma=0.0, gnss_hdop_sigma=0.0,
+            gnss_acc_log_sigma=0.2, gnss_sats_sigma=0.0, gnss_hdop_sigma=0.0,
         ),
         {"flavour_px4": True, "imu_message": "HIGHRES_IMU", "imu_rate_hz": 250.0,
          "attitude_rate_hz": 50.0, "gnss_rate_hz": 5.0, "gnss_latency_s": 0.12,
