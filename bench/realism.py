@@ -52,19 +52,36 @@ radio copter stands 300 s on each end: a ground station records long), the real 
 CONTEXT = ("duration_s", "rest_fraction", "imu_units")
 
 NOT_SHOWN = (
-    ("RTK fixed/float", "no real log has RTK; magnitudes: El-Mowafy (2005), 1.6-2.2 cm 2-D "
-     "fixed, 26-32 cm float (the simulator's GNSS_MODE_SPECS)"),
-    ("2D/3D flapping", "no real log flaps (0 per hour in every log); the switch exists "
-     "(gnss_flap_per_h) and is off in every realistic profile"),
-    ("GNSS latency", "not measurable without truth; 0.2 s (ArduPilot) / 0.12 s (PX4) taken "
-     "from the receivers' default lag the autopilots assume (ArduPilot GPS_DELAY_MS)"),
-    ("weather drift of the barometer", "the one baro log is too short to separate it from "
-     "climb; 1 hPa/h, a typical synoptic pressure tendency"),
-    ("baro ground effect", "not separable in the one baro log; 0.1 hPa (~1 m) step within "
-     "2 m of the ground with motors running, as ArduPilot's ground-effect compensation "
-     "assumes"),
-    ("receiver accuracy vs scatter (ArduPilot)", "the ArduPilot logs of that era report no "
-     "h_acc; only the PX4 log does"),
+    (
+        "RTK fixed/float",
+        "no real log has RTK; magnitudes: El-Mowafy (2005), 1.6-2.2 cm 2-D "
+        "fixed, 26-32 cm float (the simulator's GNSS_MODE_SPECS)",
+    ),
+    (
+        "2D/3D flapping",
+        "no real log flaps (0 per hour in every log); the switch exists "
+        "(gnss_flap_per_h) and is off in every realistic profile",
+    ),
+    (
+        "GNSS latency",
+        "not measurable without truth; 0.2 s (ArduPilot) / 0.12 s (PX4) taken "
+        "from the receivers' default lag the autopilots assume (ArduPilot GPS_DELAY_MS)",
+    ),
+    (
+        "weather drift of the barometer",
+        "the one baro log is too short to separate it from "
+        "climb; 1 hPa/h, a typical synoptic pressure tendency",
+    ),
+    (
+        "baro ground effect",
+        "not separable in the one baro log; 0.1 hPa (~1 m) step within "
+        "2 m of the ground with motors running, as ArduPilot's ground-effect compensation "
+        "assumes",
+    ),
+    (
+        "receiver accuracy vs scatter (ArduPilot)",
+        "the ArduPilot logs of that era report no h_acc; only the PX4 log does",
+    ),
 )
 
 

@@ -13,7 +13,6 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-
 from typing import Any
 
 import numpy as np
@@ -246,7 +245,9 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
     unit = 1e3 if sc.imu_message == "SCALED_IMU2" else 1e6
     t_imu = _grid(t0, t1, sc.imu_rate_hz, unit)
     if plan is not None and plan.rl.stamp_jitter_s > 0:
-        t_imu = np.rint((t_imu + plan.rng_link.normal(0, plan.rl.stamp_jitter_s, len(t_imu))) * unit)
+        t_imu = np.rint(
+            (t_imu + plan.rng_link.normal(0, plan.rl.stamp_jitter_s, len(t_imu))) * unit
+        )
         t_imu = np.unique(np.clip(t_imu / unit, t0, t1))
     st = path.evaluate(t_imu)
     lat, lon, alt = _lla(frame, st.pos_ned_m)
@@ -301,8 +302,10 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
             )[:, 0]  # fmt: skip
         rate_err = rng_att.standard_normal((len(t_att), 3)) * ATTITUDE_RATE_NOISE_RADPS
     att_err[:, 2] += math.radians(sc.heading_error_deg)
+    att_rz = np.zeros((len(t_att), 3))
     if plan is not None:
-        att_err += _attitude_realism(plan, len(t_att), sc.attitude_rate_hz)
+        att_rz = _attitude_realism(plan, len(t_att), sc.attitude_rate_hz)
+        att_err += att_rz
     euler_ap = sa.euler_rad + att_err
     euler_ap[:, 2] = (euler_ap[:, 2] + np.pi) % (2 * np.pi) - np.pi
     streams.append(ap.attitude_stream(not ardupilot, t_att, euler_ap, sa.gyro_b_radps + rate_err))
@@ -356,14 +359,16 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
     la, lo, al = _lla(frame, pos_ap)
     yaw_gp = sg.euler_rad[:, 2] + math.radians(sc.heading_error_deg)
     if plan is not None and len(t_att):
-        yaw_gp = yaw_gp + np.interp(t_gp, t_att, att_err[:, 2] - math.radians(sc.heading_error_deg))
+        yaw_gp = yaw_gp + np.interp(t_gp, t_att, att_rz[:, 2])
     streams.append(ap.global_position_stream(t_gp, la, lo, al, sc.alt0_m, sg.vel_ned_mps, yaw_gp))
     baro_bias, t_baro = np.zeros(0), np.zeros(0)
     if plan is not None and plan.rl.baro_rate_hz > 0:
         t_baro = _grid(t0, t1, plan.rl.baro_rate_hz, 1e3, offset_s=0.013)
         t_baro = t_baro[~_inside(t_baro, plan.baro_dropouts)]
         p_hpa, baro_bias = _baro(plan, path, frame, t_baro, t0, fixed_wing)
-        streams.append(ap.baro_stream(t_baro, p_hpa, 25.0 + 10.0 * (t_baro - t0) / max(t1 - t0, 1.0)))
+        streams.append(
+            ap.baro_stream(t_baro, p_hpa, 25.0 + 10.0 * (t_baro - t0) / max(t1 - t0, 1.0))
+        )
 
     # ---------------------------------------------------------------- merge in receive order
     emit = np.concatenate([s.emit_s for s in streams])
@@ -700,10 +705,10 @@ def _deliver(
     rebooted = False
     reboot = plan.reboot_t_s
     for k in range(n):
-        p = perm[k]
-        j, i, t_r = int(sid[p]), int(idx[p]), float(t_rx[k])
+        q = int(perm[k])
+        j, i, t_r = int(sid[q]), int(idx[q]), float(t_rx[k])
         off = 0.0
-        if reboot is not None and emit[p] >= reboot:
+        if reboot is not None and emit[q] >= reboot:
             off = reboot
             if not rebooted:
                 rebooted, last_known = True, 0.0

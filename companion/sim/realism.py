@@ -86,6 +86,8 @@ class Realism:
     vibration_gyro_ratio_radps_per_mps2: float = 0.0
     vibration_hz: float = 0.0
     """Fundamental (rotor or engine) frequency at mid throttle, Hz; harmonics 1 and 2."""
+    vibration_wander: float = 0.03
+    """Slow wander of the rotor or engine speed (fraction, 37 s period)."""
     vibration_ground_fraction: float = 0.3
     """Vibration on the ground with the motor running, as a fraction of in flight."""
     filter_hz: float = 20.0
@@ -180,48 +182,107 @@ _ARDU_COPTER = Realism(
 _PROFILES: dict[str, tuple[Realism, dict[str, Any]]] = {
     "copter": (
         _ARDU_COPTER,
-        {"imu_message": "RAW_IMU", "imu_rate_hz": 50.0, "attitude_rate_hz": 10.0,
-         "gnss_rate_hz": 5.0, "gnss_latency_s": 0.2, "gnss_mode": "3d",
-         "gnss_vel_noise_mps": 0.02},
+        {
+            "imu_message": "RAW_IMU",
+            "imu_rate_hz": 50.0,
+            "attitude_rate_hz": 10.0,
+            "gnss_rate_hz": 5.0,
+            "gnss_latency_s": 0.2,
+            "gnss_mode": "3d",
+            "gnss_vel_noise_mps": 0.02,
+        },
     ),
     "copter_radio": (
         dataclasses.replace(
-            _ARDU_COPTER, stamp_jitter_s=0.25, burst_per_h=250.0, burst_s=1.5, reboot_at_fraction=0.4,
-            gnss_nofix_start_s=2.0, gnss_garbage=False,
-            dropout_per_h=30.0, baro_rate_hz=1.3, baro_noise_hpa=0.025,
-            baro_drift_hpa_per_h=1.0, baro_ground_effect_hpa=0.1, baro_dropout_per_h=4.0,
+            _ARDU_COPTER,
+            stamp_jitter_s=0.25,
+            burst_per_h=250.0,
+            burst_s=1.5,
+            reboot_at_fraction=0.4,
+            gnss_nofix_start_s=2.0,
+            gnss_garbage=False,
+            dropout_per_h=30.0,
+            baro_rate_hz=1.3,
+            baro_noise_hpa=0.025,
+            baro_drift_hpa_per_h=1.0,
+            baro_ground_effect_hpa=0.1,
+            baro_dropout_per_h=4.0,
         ),
-        {"imu_message": "RAW_IMU", "imu_rate_hz": 1.3, "attitude_rate_hz": 1.0,
-         "gnss_rate_hz": 1.3, "gnss_latency_s": 0.2, "gnss_mode": "3d",
-         "gnss_vel_noise_mps": 0.02},
+        {
+            "imu_message": "RAW_IMU",
+            "imu_rate_hz": 1.3,
+            "attitude_rate_hz": 1.0,
+            "gnss_rate_hz": 1.3,
+            "gnss_latency_s": 0.2,
+            "gnss_mode": "3d",
+            "gnss_vel_noise_mps": 0.02,
+        },
     ),  # fmt: skip
     "plane": (
         dataclasses.replace(
-            _ARDU_COPTER, attitude_trim_deg=1.3, acc_noise_mps2=0.15, vibration_mps2=25.0, vibration_hz=90.0,
-            vibration_broadband_mps2=1.2, stamp_jitter_s=0.0015, gnss_nofix_start_s=0.4,
-            gnss_garbage=False, gnss_gap_per_h=4.0, gnss_gap_min_s=0.5, gnss_gap_max_s=0.9,
+            _ARDU_COPTER,
+            attitude_trim_deg=1.3,
+            acc_noise_mps2=0.15,
+            vibration_mps2=25.0,
+            vibration_hz=90.0,
+            vibration_broadband_mps2=1.2,
+            stamp_jitter_s=0.0015,
+            gnss_nofix_start_s=0.4,
+            gnss_garbage=False,
+            gnss_gap_per_h=4.0,
+            gnss_gap_min_s=0.5,
+            gnss_gap_max_s=0.9,
             dropout_per_h=0.0,
         ),
-        {"imu_message": "RAW_IMU", "imu_rate_hz": 10.0, "attitude_rate_hz": 10.0,
-         "gnss_rate_hz": 5.0, "gnss_latency_s": 0.2, "gnss_mode": "3d",
-         "gnss_vel_noise_mps": 0.02},
+        {
+            "imu_message": "RAW_IMU",
+            "imu_rate_hz": 10.0,
+            "attitude_rate_hz": 10.0,
+            "gnss_rate_hz": 5.0,
+            "gnss_latency_s": 0.2,
+            "gnss_mode": "3d",
+            "gnss_vel_noise_mps": 0.02,
+        },
     ),  # fmt: skip
     "px4": (
         Realism(
-            attitude_trim_deg=0.07, attitude_tilt_sigma_deg=0.03, attitude_yaw_sigma_deg=1.0,
-            attitude_lag_s=0.01, autopilot_pos_sigma_m=1.0, acc_bias_mps2=0.005,
-            acc_scale_sigma=0.002, misalign_sigma_rad=1e-3, gyro_bias_radps=0.1 * _DEG,
-            gyro_rw_radps_rts=5e-5, temp_rise_c=10.0, acc_temp_mps2_per_c=0.0005,
-            acc_noise_mps2=0.015, gyro_noise_radps=0.002, vibration_mps2=5.0,
-            vibration_broadband_mps2=0.1, vibration_gyro_ratio_radps_per_mps2=0.15,
-            vibration_hz=140.0, filter_hz=30.0, gnss_vel_bias_mps=0.05,
-            dropout_per_h=60.0, dropout_min_s=0.07, dropout_max_s=0.14,
-            gnss_acc_log_sigma=0.2, gnss_sats_sigma=0.0, gnss_hdop_sigma=0.0,
+            attitude_trim_deg=0.07,
+            attitude_tilt_sigma_deg=0.03,
+            attitude_yaw_sigma_deg=1.0,
+            attitude_lag_s=0.01,
+            autopilot_pos_sigma_m=1.0,
+            acc_bias_mps2=0.005,
+            acc_scale_sigma=0.002,
+            misalign_sigma_rad=1e-3,
+            gyro_bias_radps=0.1 * _DEG,
+            gyro_rw_radps_rts=5e-5,
+            temp_rise_c=10.0,
+            acc_temp_mps2_per_c=0.0005,
+            acc_noise_mps2=0.015,
+            gyro_noise_radps=0.002,
+            vibration_mps2=5.0,
+            vibration_broadband_mps2=0.1,
+            vibration_gyro_ratio_radps_per_mps2=0.15,
+            vibration_hz=140.0,
+            filter_hz=30.0,
+            gnss_vel_bias_mps=0.05,
+            dropout_per_h=60.0,
+            dropout_min_s=0.07,
+            dropout_max_s=0.14,
+            gnss_acc_log_sigma=0.2,
+            gnss_sats_sigma=0.0,
+            gnss_hdop_sigma=0.0,
         ),
-        {"flavour_px4": True, "imu_message": "HIGHRES_IMU", "imu_rate_hz": 250.0,
-         "attitude_rate_hz": 50.0, "gnss_rate_hz": 5.0, "gnss_latency_s": 0.12,
-         "gnss_mode": "3d",
-         "gnss_vel_noise_mps": 0.02},
+        {
+            "flavour_px4": True,
+            "imu_message": "HIGHRES_IMU",
+            "imu_rate_hz": 250.0,
+            "attitude_rate_hz": 50.0,
+            "gnss_rate_hz": 5.0,
+            "gnss_latency_s": 0.12,
+            "gnss_mode": "3d",
+            "gnss_vel_noise_mps": 0.02,
+        },
     ),  # fmt: skip
 }
 VEHICLES = tuple(_PROFILES)
@@ -316,24 +377,30 @@ def imu_realism(
     acc_err = np.broadcast_to(rng.uniform(-rl.acc_bias_mps2, rl.acc_bias_mps2, 3), (n, 3)).copy()
     gyro_err = np.broadcast_to(rng.normal(0.0, rl.gyro_bias_radps, 3), (n, 3)).copy()
     dt = np.diff(t_s, prepend=t_s[0] if n else 0.0)
-    gyro_err += np.cumsum(rng.standard_normal((n, 3)) * rl.gyro_rw_radps_rts * np.sqrt(dt)[:, None], 0)
+    gyro_err += np.cumsum(
+        rng.standard_normal((n, 3)) * rl.gyro_rw_radps_rts * np.sqrt(dt)[:, None], 0
+    )
     temp = rl.temp_rise_c * (1.0 - np.exp(-(t_s - t_boot0_s + 60.0) / rl.temp_tau_s))
     da, dg = rng.standard_normal(3), rng.standard_normal(3)
-    acc_err += temp[:, None] * rl.acc_temp_mps2_per_c * da / max(np.linalg.norm(da), 1e-9)
-    gyro_err += temp[:, None] * rl.gyro_temp_radps_per_c * dg / max(np.linalg.norm(dg), 1e-9)
+    acc_err += temp[:, None] * rl.acc_temp_mps2_per_c * da / max(float(np.linalg.norm(da)), 1e-9)
+    gyro_err += temp[:, None] * rl.gyro_temp_radps_per_c * dg / max(float(np.linalg.norm(dg)), 1e-9)
     acc_err += rng.standard_normal((n, 3)) * rl.acc_noise_mps2
     gyro_err += rng.standard_normal((n, 3)) * rl.gyro_noise_radps
     vib = np.zeros((n, 3))
     if (rl.vibration_mps2 > 0 or rl.vibration_broadband_mps2 > 0) and n > 1:
-        # rotor speed: follows the vibration level, wanders 3 % slowly
-        wander = 1.0 + 0.03 * np.sin(2 * np.pi * t_s / 37.0 + rng.uniform(0, 2 * np.pi))
+        # rotor speed: follows the vibration level, wanders slowly
+        wander = 1.0 + rl.vibration_wander * np.sin(
+            2 * np.pi * t_s / 37.0 + rng.uniform(0, 2 * np.pi)
+        )
         f1 = rl.vibration_hz * (0.8 + 0.2 * np.clip(vib_level, 0.0, 1.0)) * wander
         cyc = np.concatenate([[0.0], np.cumsum(0.5 * (f1[1:] + f1[:-1]) * np.diff(t_s))])
         for h in (1, 2):
             gain, ph = butter2_response(h * f1, rl.filter_hz)
             amp = rl.vibration_mps2 / h * gain * vib_level
             phase0 = rng.uniform(0, 2 * np.pi, 3)
-            vib += amp[:, None] * np.sin(2 * np.pi * h * cyc[:, None] + phase0[None, :] + ph[:, None])
+            vib += amp[:, None] * np.sin(
+                2 * np.pi * h * cyc[:, None] + phase0[None, :] + ph[:, None]
+            )
         vib += rng.standard_normal((n, 3)) * rl.vibration_broadband_mps2 * vib_level[:, None]
     acc_err += vib
     gyro_err += vib[:, ::-1] * rl.vibration_gyro_ratio_radps_per_mps2

@@ -6,9 +6,10 @@ SCALED_PRESSURE, which the decoder does not turn into samples, is read from the
 raw messages. Every statistic is None where the log does not show it (no rest
 period, no GNSS, no barometer).
 
-Rest: IMU samples in a 2 s window (at least 6 samples) whose gyro norm stays below 0.05 rad/s and whose
-specific-force norm varies by less than 0.3 m/s^2 (standard deviation), i.e. the
-vehicle stands still, engines on or off.
+Rest: IMU samples in a 2 s window (at least 6 samples) whose gyro norm stays below
+0.05 rad/s and whose specific-force norm varies by less than 0.3 m/s^2 (standard
+deviation), and whose speed (see ``REST_SPEED_MPS``) is low: the vehicle stands still,
+engines on or off.
 """
 
 from __future__ import annotations
@@ -209,8 +210,10 @@ def _imu_stats(
 def _gnss_stats(
     gnss: list[GnssFix], imu: list[ImuSample], speed: tuple[np.ndarray, np.ndarray]
 ) -> dict[str, float | None]:
-    keys = ("gnss_rate_hz", "gnss_nofix_pct", "gnss_garbage_pct", "gnss_2d3d_flaps_per_h",
-            "gnss_rest_speed_mps", "gnss_hacc_over_scatter", "gnss_sats_std", "gnss_hdop_std")  # fmt: skip
+    keys = (
+        "gnss_rate_hz", "gnss_nofix_pct", "gnss_garbage_pct", "gnss_2d3d_flaps_per_h",
+        "gnss_rest_speed_mps", "gnss_hacc_over_scatter", "gnss_sats_std", "gnss_hdop_std",
+    )  # fmt: skip
     out: dict[str, float | None] = dict.fromkeys(keys, None)
     if len(gnss) < 10:
         return out
@@ -221,7 +224,9 @@ def _gnss_stats(
     ft = np.array([int(g.fix_type) for g in gnss])
     nofix = ft <= FixType.NO_FIX
     out["gnss_nofix_pct"] = float(100.0 * nofix.mean())
-    garbage = np.array([(int(g.fix_type) <= 1) and (g.lat_rad != 0.0 or g.lon_rad != 0.0) for g in gnss])
+    garbage = np.array(
+        [(int(g.fix_type) <= 1) and (g.lat_rad != 0.0 or g.lon_rad != 0.0) for g in gnss]
+    )
     out["gnss_garbage_pct"] = float(100.0 * garbage.mean())
     dur_h = max((t.max() - t.min()) / 3600.0, 1e-9)
     is3d = ft >= FixType.FIX_3D
