@@ -167,6 +167,7 @@ class SimFlight:
     """A simulated flight: truth, typed samples and MAVLink messages."""
 
     scenario: Scenario
+    """As asked; with realism, ``events`` and ``truth.scenario`` add the drawn windows."""
     seed: int
     frame: LocalFrame
     truth: Truth
@@ -397,7 +398,7 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
         sc.name, seed, duration, len(messages), len(samples),
     )  # fmt: skip
     return SimFlight(
-        sc, int(seed), frame, truth, sc.events, samples, messages,
+        scenario, int(seed), frame, truth, sc.events, samples, messages,
         SimErrors(
             ierr, att_err, t_att, tuple(gnss_truth),
             None if plan is None else RealismTruth(
@@ -696,8 +697,8 @@ def _deliver(
     n = len(emit)
     perm = np.arange(n)
     if rl.reorder_fraction > 0 and n > 2:
-        for k in np.flatnonzero(rng.uniform(size=n - 1) < rl.reorder_fraction):
-            perm[k], perm[k + 1] = perm[k + 1], perm[k]
+        for sw in np.flatnonzero(rng.uniform(size=n - 1) < rl.reorder_fraction):
+            perm[sw], perm[sw + 1] = perm[sw + 1], perm[sw]
     dup = rng.uniform(size=n) < rl.duplicate_fraction if rl.duplicate_fraction > 0 else None
     messages: list[tuple[float, object]] = []
     samples: list[Sample] = []

@@ -517,6 +517,37 @@ _CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
     ),
 }
 
+
+def _realistic_variant(
+    name: str, vehicle: str, label: str, extra: dict[str, Any]
+) -> tuple[dict[str, Any], EventFactory, str]:
+    """A catalogued flight as a realistic autopilot of ``vehicle`` delivers it (its GNSS
+    mode kept: the realism is the autopilot's, the receiver's mode is the scenario's)."""
+    from companion.sim.realism import realistic
+
+    base, factory, desc = _CATALOGUE[name]
+    over = {k: v for k, v in realistic(vehicle).items() if k != "gnss_mode"}
+    return {**base, **over, **extra}, factory, f"{desc}; as a realistic {label} delivers it"
+
+
+_REALISTIC_VARIANTS: dict[str, tuple[Any, ...]] = {
+    "taxi_realistic": ("taxi", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "approach_rtk20_realistic": ("approach_rtk20", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "cruise_gnss_loss_realistic": ("cruise_gnss_loss", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "nominal_realistic": ("nominal", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "copter_realistic": ("px4_rotorcraft", "copter", "ArduCopter on a serial port (50 Hz)"),
+    "copter_radio_realistic": (
+        "px4_rotorcraft", "copter_radio", "ArduCopter through a telemetry radio (~1 Hz)",
+    ),
+    "px4_rotorcraft_realistic": (
+        "px4_rotorcraft", "px4", "PX4 (HIGHRES_IMU 250 Hz; the first 150 s)",
+        {"duration_s": 150.0},
+    ),
+}  # fmt: skip
+"""Realistic variants of the bundled flights (companion.sim.realism's profiles)."""
+for _name, (_base, _vehicle, _label, *_extra) in _REALISTIC_VARIANTS.items():
+    _CATALOGUE[_name] = _realistic_variant(_base, _vehicle, _label, *(_extra or [{}]))
+
 SCENARIO_NAMES: tuple[str, ...] = tuple(_CATALOGUE)
 """The named scenarios :func:`make_scenario` knows."""
 
