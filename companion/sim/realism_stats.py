@@ -156,6 +156,7 @@ def _imu_stats(
     out: dict[str, float | None] = dict.fromkeys(
         ("imu_rate_hz", "imu_dt_jitter_ms", "imu_t_backwards_pct", "rest_fraction",
          "rest_sf_resid_mps2", "rest_tilt_disagree_deg", "rest_acc_noise_mps2",
+         "rest_gyro_bias_dps",
          "inair_acc_hp_mps2"),
         None,
     )  # fmt: skip
@@ -182,6 +183,8 @@ def _imu_stats(
     if rest.sum() >= 10:
         ra = acc[rest]
         out["rest_acc_noise_mps2"] = float(np.median(np.std(ra - ra.mean(axis=0), axis=0)))
+        # the gyro's mean at rest is its bias (Earth rate, 0.004 deg/s, is below it)
+        out["rest_gyro_bias_dps"] = float(np.degrees(np.linalg.norm(gyro[rest].mean(axis=0))))
     # in the air, or moving: high-passed specific force (vibration as delivered)
     moving = ~rest
     if moving.sum() >= 20:
