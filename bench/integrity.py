@@ -251,7 +251,7 @@ def sim_flights() -> None:
     print("(real.: the same flight as the realistic ArduPlane autopilot delivers it)")
     print(
         f"{'flight':<14} {'fault':<32} {'first alarm':>12} {'delay s':>8} {'size m':>7} alarms"
-        f" | {'real. first alarm':>17} {'delay s':>8} {'size m':>7} alarms"
+        f" | {'real. alarm':>12} {'delay s':>8} {'size m':>7} alarms"
     )
     real_over = {k: v for k, v in realistic("plane").items() if k != "gnss_mode"}
     for name in ("ramp_fault", "dither_fault", "nominal"):
