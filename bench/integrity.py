@@ -69,6 +69,7 @@ from companion.integrity.protection.phase import PhaseConfig  # noqa: E402
 from companion.nav.navigator import NavState  # noqa: E402
 from companion.sim.integrity_approaches import ApproachSpec, Fault, run_approach  # noqa: E402
 from companion.sim.integrity_runs import run_samples  # noqa: E402
+from companion.sim.realism import realistic  # noqa: E402
 
 FIELD_M = 110.0
 CAT = ApproachCategory.CAT_II
@@ -247,31 +248,45 @@ def nominal(hours: float, seed: int) -> tuple[float, int, int, dict[str, int]]:
 
 def sim_flights() -> None:
     print("\nSimulator flights (seed 1), monitor on the typed samples, pass-through navigator")
-    print(f"{'flight':<14} {'fault':<32} {'first alarm':>12} {'delay s':>8} {'size m':>7} alarms")
+    print("(real.: the same flight as the realistic ArduPlane autopilot delivers it)")
+    print(
+        f"{'flight':<14} {'fault':<32} {'first alarm':>12} {'delay s':>8} {'size m':>7} alarms"
+        f" | {'real. alarm':>12} {'delay s':>8} {'size m':>7} alarms"
+    )
+    real_over = {k: v for k, v in realistic("plane").items() if k != "gnss_mode"}
     for name in ("ramp_fault", "dither_fault", "nominal"):
         print(f"flight {name}", file=sys.stderr)
-        flight = sim.simulate(sim.make_scenario(name), seed=1)
-        res = run_samples(flight.samples, IntegrityMonitor())
-        faults = [e for e in flight.events if e.kind in ("step", "ramp", "dither")]
-        if not faults:
-            print(f"{name:<14} {'none':<32} {'-':>12} {'-':>8} {'-':>7} {len(res.alarms)}")
-            continue
-        ev = faults[0]
-        after = [a for a in res.alarms if a[0] >= ev.t_start_s]
-        desc = f"{ev.kind} {dict(ev.params)}"[:32]
-        if not after:
-            print(f"{name:<14} {desc:<32} {'missed':>12}")
-            continue
-        t_a = after[0][0]
-        tau = t_a - ev.t_start_s
-        if ev.kind == "ramp":
-            size = tau * float(np.linalg.norm(ev.params["rate_ned_mps"]))
-        else:
-            size = abs(
-                float(ev.params["amplitude_m"])
-                * math.sin(2 * math.pi * tau / ev.params["period_s"])
-            )
-        print(f"{name:<14} {desc:<32} {after[0][1]:>12} {tau:8.2f} {size:7.2f} {len(res.alarms)}")
+        cells = []
+        for over in ({}, real_over):
+            flight = sim.simulate(sim.make_scenario(name, **over), seed=1)
+            res = run_samples(flight.samples, IntegrityMonitor())
+            faults = [e for e in flight.events if e.kind in ("step", "ramp", "dither")]
+            cells.append(_sim_flight_cells(faults, res.alarms))
+        desc, plain = cells[0]
+        _, real = cells[1]
+        print(f"{name:<14} {desc:<32} {plain} | {real}")
+
+
+def _sim_flight_cells(
+    faults: list[sim.Event], alarms: tuple[tuple[float, str, str], ...]
+) -> tuple[str, str]:
+    """(fault description, 'first alarm, delay, size, alarms' cells) of one flight."""
+    if not faults:
+        return "none", f"{'-':>12} {'-':>8} {'-':>7} {len(alarms)}"
+    ev = faults[0]
+    after = [a for a in alarms if a[0] >= ev.t_start_s]
+    desc = f"{ev.kind} {dict(ev.params)}"[:32]
+    if not after:
+        return desc, f"{'missed':>12} {'':>8} {'':>7} {len(alarms)}"
+    t_a = after[0][0]
+    tau = t_a - ev.t_start_s
+    if ev.kind == "ramp":
+        size = tau * float(np.linalg.norm(ev.params["rate_ned_mps"]))
+    else:
+        size = abs(
+            float(ev.params["amplitude_m"]) * math.sin(2 * math.pi * tau / ev.params["period_s"])
+        )
+    return desc, f"{after[0][1]:>12} {tau:8.2f} {size:7.2f} {len(alarms)}"
 
 
 INS_CASES = [

@@ -498,41 +498,79 @@ def part_b(
     grades: tuple[str, ...],
     pseudo_hz: float,
     kind: str = "approach",
+    realistic_seeds: int = 0,
 ) -> None:
     """5/10/20-s gaps (all GNSS withheld) in the glide of simulated approaches, or in the
-    turning cruise of simulated cruises (``kind``)."""
+    turning cruise of simulated cruises (``kind``); ``realistic_seeds`` more flights as the
+    realistic ArduPlane autopilot delivers them (``bench/outage.py``'s realistic flights)."""
     cells: dict[tuple[str, float, str], GapErrors] = {}
     fusion: dict[str, list[int]] = {g: [0, 0] for g in grades}
     alphas: dict[str, list[tuple[float, float]]] = {g: [] for g in grades}
+    rcells: dict[tuple[str, float, str], GapErrors] = {}
+    rfusion: dict[str, list[int]] = {g: [0, 0] for g in grades}
+    ralphas: dict[str, list[tuple[float, float]]] = {g: [] for g in grades}
     max_gap = max(gaps)
+    runs = [(False, s) for s in range(seeds)] + [(True, s) for s in range(realistic_seeds)]
     for grade in grades:
-        for seed in range(seeds):
-            _progress(f"part B: {grade} {kind}, seed {seed}")
-            flight = simulate_flight(kind, grade, seed, max_gap)
+        for real, seed in runs:
+            _progress(f"part B: {grade} {kind}, seed {seed}{' (realistic)' if real else ''}")
+            flight = simulate_flight(kind, grade, seed, max_gap, realistic=real)
             t_gap0 = outage_start_s(flight, kind)
+            _part_b_flight(
+                flight, grade, seed, t_gap0, max_gap, gaps, pseudo_hz,
+                rcells if real else cells, rfusion if real else fusion,
+                ralphas if real else alphas,
+            )  # fmt: skip
+    _part_b_tables(kind, seeds, gaps, grades, pseudo_hz, cells, fusion, alphas, rcells)
 
-            def truth(t: float, fl: SimFlight = flight) -> FloatArray:
-                return np.asarray(fl.truth.at(t).pos_ned_m)
 
-            cfg = BlendConfig.for_grade(grade, mode="strapdown", adaptive=True)
-            rec = GapRecorder(BlendNavigator(cfg, flight.frame), t_gap0, seed)
-            run_one(rec, flight, t_gap0, max_gap, None)
-            alphas[grade].append((rec.pot.alpha_ps, rec.pot.g_ps2))
-            pse = GapRecorder(BlendNavigator(cfg, flight.frame), t_gap0, seed, pseudo_hz)
-            run_one(pse, flight, t_gap0, max_gap, None)
-            fusion[grade][0] += pse.pseudo_fused
-            fusion[grade][1] += pse.pseudo_sent
-            for method in METHODS:
-                src = pse if method == "ins+pot(pseudo)" else rec
-                t, e3, e2, ev, nees = _errors(src.rec[method], truth)
-                for gap in gaps:
-                    m = (t - t_gap0) <= gap + 1e-9
-                    row = (
-                        float(e3[m].mean()), float(e3[m].max()), float(e2[m].mean()),
-                        float(e2[m].max()), float(ev[m].mean()), float(ev[m].max()),
-                        float(np.nanmean(nees[m])) if np.any(np.isfinite(nees[m])) else np.nan,
-                    )  # fmt: skip
-                    cells.setdefault((grade, gap, method), GapErrors()).runs.append(row)
+def _part_b_flight(
+    flight: SimFlight,
+    grade: str,
+    seed: int,
+    t_gap0: float,
+    max_gap: float,
+    gaps: tuple[float, ...],
+    pseudo_hz: float,
+    cells: dict[tuple[str, float, str], GapErrors],
+    fusion: dict[str, list[int]],
+    alphas: dict[str, list[tuple[float, float]]],
+) -> None:
+    def truth(t: float, fl: SimFlight = flight) -> FloatArray:
+        return np.asarray(fl.truth.at(t).pos_ned_m)
+
+    cfg = BlendConfig.for_grade(grade, mode="strapdown", adaptive=True)
+    rec = GapRecorder(BlendNavigator(cfg, flight.frame), t_gap0, seed)
+    run_one(rec, flight, t_gap0, max_gap, None)
+    alphas[grade].append((rec.pot.alpha_ps, rec.pot.g_ps2))
+    pse = GapRecorder(BlendNavigator(cfg, flight.frame), t_gap0, seed, pseudo_hz)
+    run_one(pse, flight, t_gap0, max_gap, None)
+    fusion[grade][0] += pse.pseudo_fused
+    fusion[grade][1] += pse.pseudo_sent
+    for method in METHODS:
+        src = pse if method == "ins+pot(pseudo)" else rec
+        t, e3, e2, ev, nees = _errors(src.rec[method], truth)
+        for gap in gaps:
+            m = (t - t_gap0) <= gap + 1e-9
+            row = (
+                float(e3[m].mean()), float(e3[m].max()), float(e2[m].mean()),
+                float(e2[m].max()), float(ev[m].mean()), float(ev[m].max()),
+                float(np.nanmean(nees[m])) if np.any(np.isfinite(nees[m])) else np.nan,
+            )  # fmt: skip
+            cells.setdefault((grade, gap, method), GapErrors()).runs.append(row)
+
+
+def _part_b_tables(
+    kind: str,
+    seeds: int,
+    gaps: tuple[float, ...],
+    grades: tuple[str, ...],
+    pseudo_hz: float,
+    cells: dict[tuple[str, float, str], GapErrors],
+    fusion: dict[str, list[int]],
+    alphas: dict[str, list[tuple[float, float]]],
+    rcells: dict[tuple[str, float, str], GapErrors],
+) -> None:
     print(
         f"\nPart B - {kind} flights (simulator), {seeds} seeds per cell: "
         "all GNSS withheld\n(approach: 40 s into the glide; cruise: 70 s into the turning "
@@ -551,6 +589,7 @@ def part_b(
         hdr = (
             f"{'gap s':>5} {'method':<16} {'3-D mean':>9} {'3-D max':>8} {'2-D mean':>9} "
             f"{'2-D max':>8} {'V mean':>7} {'V max':>7} {'ratio':>6} {'vs best':>7} {'NEES':>7}"
+            + (f" | {'real. 3-D mean':>14} {'V mean':>7} {'NEES':>8}" if rcells else "")
         )
         print(hdr)
         for gap in gaps:
@@ -569,7 +608,24 @@ def part_b(
                 print(
                     f"{gap:5.0f} {method:<16} {v[0]:9.3f} {v[1]:8.3f} {v[2]:9.3f} {v[3]:8.3f} "
                     f"{v[4]:7.3f} {v[5]:7.3f} {v[0] / agg['cv'][0]:6.2f} {vs} {v[6]:7.2f}"
+                    + _real_cells(rcells, (grade, gap, method))
                 )
+    if rcells:
+        n_r = len(next(iter(rcells.values())).runs)
+        print(
+            f"realistic: {n_r} flights per cell as the realistic ArduPlane autopilot delivers "
+            "them (RAW_IMU 10 Hz, bias, vibration, ATTITUDE trim, GNSS 5 Hz, 0.2 s latency)"
+        )
+
+
+def _real_cells(
+    rcells: dict[tuple[str, float, str], GapErrors], key: tuple[str, float, str]
+) -> str:
+    if not rcells or key not in rcells:
+        return ""
+    r = np.array(rcells[key].runs)
+    nees = np.nanmean(r[:, 6]) if np.any(np.isfinite(r[:, 6])) else np.nan
+    return f" | {r[:, 0].mean():14.3f} {r[:, 4].mean():7.3f} {nees:8.3g}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -581,6 +637,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grades", nargs="+", default=["tactical", "mems"])
     ap.add_argument("--flights", nargs="+", default=["approach", "cruise"], help="part B")
     ap.add_argument("--pseudo-hz", type=float, default=1.0, help="pseudo-measurement rate")
+    ap.add_argument(
+        "--b-realistic-seeds", type=int, default=3, help="part B realistic flights per grade"
+    )
     args = ap.parse_args(argv)
     # rejections are counted and printed below instead of logged one by one
     logging.getLogger("companion.nav.potential").setLevel(logging.ERROR)
@@ -603,7 +662,10 @@ def main(argv: list[str] | None = None) -> int:
         timing_section(0)
     if args.part in ("all", "B"):
         for kind in args.flights:
-            part_b(args.b_seeds, tuple(args.gaps), tuple(args.grades), args.pseudo_hz, kind)
+            part_b(
+                args.b_seeds, tuple(args.gaps), tuple(args.grades), args.pseudo_hz, kind,
+                args.b_realistic_seeds,
+            )  # fmt: skip
     return 0
 
 

@@ -9,6 +9,9 @@ CSV and the JSON sidecar that ``companion simulate`` produces.
 * :mod:`~companion.sim.trajectory` — the smooth flight path from a phase script;
 * :mod:`~companion.sim.sensors` — IMU, GNSS and attitude error models;
 * :mod:`~companion.sim.autopilot` — the autopilot's MAVLink messages and their samples;
+* :mod:`~companion.sim.realism` — an autopilot as imperfect as a real one: switches and
+  the ``realistic`` profiles; :mod:`~companion.sim.realism_stats` — the statistics
+  ``bench/realism.py`` compares with the real logs;
 * :mod:`~companion.sim.flight` — :func:`simulate`;
 * :mod:`~companion.sim.writer` — the .tlog, truth CSV and sidecar;
 * :mod:`~companion.sim.costs` — what an integer IMU message costs a free-running INS;

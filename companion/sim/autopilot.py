@@ -125,10 +125,10 @@ def imu_stream(
     mat_nb: FloatArray,
     alt_msl_m: FloatArray,
 ) -> Stream:
-    """RAW_IMU / SCALED_IMU2 (mG, mrad/s integers) or HIGHRES_IMU (float32 SI)."""
+    """RAW_IMU / SCALED_IMU2 / SCALED_IMU3 (mG, mrad/s integers) or HIGHRES_IMU (float32 SI)."""
     mag_b = np.einsum("nji,j->ni", mat_nb, MAG_NED_MGAUSS)
     emit = t_s + 0.001
-    if message in ("RAW_IMU", "SCALED_IMU2"):
+    if message in ("RAW_IMU", "SCALED_IMU2", "SCALED_IMU3"):
         acc_i = np.clip(np.rint(acc_b_mps2 * units.MG_PER_MPS2), -32768, 32767).astype(int)
         gyr_i = np.clip(np.rint(gyro_b_radps * units.MRAD_PER_RAD), -32768, 32767).astype(int)
         mag_i = np.clip(np.rint(mag_b), -32768, 32767).astype(int)
@@ -141,6 +141,12 @@ def imu_stream(
             else np.rint(t_s * units.MS_PER_S).astype(np.int64)
         )
         acc_l, gyr_l, mag_l, st_l = acc_i.tolist(), gyr_i.tolist(), mag_i.tolist(), stamp.tolist()
+        imu_id = {"RAW_IMU": 0, "SCALED_IMU2": 1, "SCALED_IMU3": 2}[message]
+        scaled_cls = (
+            mav.MAVLink_scaled_imu3_message
+            if message == "SCALED_IMU3"
+            else mav.MAVLink_scaled_imu2_message
+        )
 
         def make_int(
             i: int, t_rx: float, _last: float | None
@@ -150,9 +156,9 @@ def imu_stream(
                 msg = mav.MAVLink_raw_imu_message(st_l[i], *a, *g, *m, 0, 4500)
                 t = st_l[i] / units.US_PER_S
             else:
-                msg = mav.MAVLink_scaled_imu2_message(st_l[i], *a, *g, *m, 4500)
+                msg = scaled_cls(st_l[i], *a, *g, *m, 4500)
                 t = st_l[i] / units.MS_PER_S
-            smp = ImuSample(t, t_rx, acc_dec[i].copy(), gyr_dec[i].copy(), 0 if raw else 1, message)
+            smp = ImuSample(t, t_rx, acc_dec[i].copy(), gyr_dec[i].copy(), imu_id, message)
             return msg, smp, t
 
         return Stream(message, emit, make_int)
@@ -253,6 +259,8 @@ class GnssReport:
     hdop: float
     vdop: float
     satellites: int
+    keep_coords: bool = False
+    """Write the coordinates even without a fix (a receiver's garbage during no-fix)."""
 
 
 def gnss_stream(
@@ -272,9 +280,10 @@ def gnss_stream(
         epoch_us = round(epoch0_s * units.US_PER_S) + boot_us
         time_usec = epoch_us if ardupilot else boot_us
         has_fix = r.fix_type >= FixType.FIX_2D
-        lat = _i(r.lat_rad * units.DEGE7_PER_RAD, -(2**31), 2**31 - 1) if has_fix else 0
-        lon = _i(r.lon_rad * units.DEGE7_PER_RAD, -(2**31), 2**31 - 1) if has_fix else 0
-        alt = _i(r.alt_msl_m * units.MM_PER_M, -(2**31), 2**31 - 1) if has_fix else 0
+        coords = has_fix or r.keep_coords
+        lat = _i(r.lat_rad * units.DEGE7_PER_RAD, -(2**31), 2**31 - 1) if coords else 0
+        lon = _i(r.lon_rad * units.DEGE7_PER_RAD, -(2**31), 2**31 - 1) if coords else 0
+        alt = _i(r.alt_msl_m * units.MM_PER_M, -(2**31), 2**31 - 1) if coords else 0
         alt_e = _i(r.alt_hae_m * units.MM_PER_M, -(2**31), 2**31 - 1) if has_fix else 0
         gs = float(np.hypot(r.vel_ne_mps[0], r.vel_ne_mps[1]))
         vel = _i(gs * units.CM_PER_M, 0, units.UINT16_UNKNOWN - 1)
@@ -475,3 +484,15 @@ def global_position_stream(
         return msg, smp, t
 
     return Stream("GLOBAL_POSITION_INT", t_s + 0.003, make)
+
+
+def baro_stream(t_s: FloatArray, p_hpa: FloatArray, temp_c: FloatArray) -> Stream:
+    """SCALED_PRESSURE (hPa float32, cdegC): no typed sample (the decoder keeps none)."""
+    ms = np.rint(t_s * units.MS_PER_S).astype(np.int64).tolist()
+    p_l = p_hpa.astype(np.float32).tolist()
+    c_l = np.rint(temp_c * 100.0).astype(int).tolist()
+
+    def make(i: int, t_rx: float, _last: float | None) -> tuple[Any, Sample | None, float | None]:
+        return mav.MAVLink_scaled_pressure_message(ms[i], p_l[i], 0.0, c_l[i], 0), None, None
+
+    return Stream("SCALED_PRESSURE", t_s + 0.005, make)

@@ -45,6 +45,7 @@ from typing import Any
 
 from companion.nav.frames import LocalFrame
 from companion.ranges import check_ranges, ranged
+from companion.sim.realism import Realism
 from companion.sim.trajectory import ScriptBuilder
 from companion.types import AutopilotFlavour
 
@@ -147,6 +148,9 @@ class Scenario:
     epoch0_s: float = 1_768_471_200.0
     """UNIX time of autopilot boot (2026-01-15 10:00 UTC): fixed, no clock is read."""
     truth_rate_hz: float = ranged(10.0, gt=0.0, le=1000.0)
+    realism: Realism | None = None
+    """The autopilot's imperfections (:mod:`companion.sim.realism`); None: none (left out
+    of :meth:`as_dict`, so existing sidecars stay as they are)."""
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> ValueError:
@@ -166,6 +170,8 @@ class Scenario:
         for length, turn in self.taxi_legs:
             if not (length > 0.0 and abs(turn) <= 180.0):
                 raise bad(f"taxi leg ({length}, {turn}) needs length > 0 and |turn| <= 180")
+        if self.realism is not None and not isinstance(self.realism, Realism):
+            raise bad("realism must be a Realism or None")
         for ev in self.events:
             if not isinstance(ev, Event):
                 raise bad("events must be Event instances")
@@ -182,7 +188,11 @@ class Scenario:
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if f.name == "events":
+            if f.name == "realism":
+                if v is None:
+                    continue
+                v = v.as_dict()
+            elif f.name == "events":
                 v = [e.as_dict() for e in v]
             elif isinstance(v, AutopilotFlavour):
                 v = v.value
@@ -506,6 +516,37 @@ _CATALOGUE: dict[str, tuple[dict[str, Any], EventFactory, str]] = {
         "3 deg approach, landing; MEMS IMU, RTK fixed, no events",
     ),
 }
+
+
+def _realistic_variant(
+    name: str, vehicle: str, label: str, extra: dict[str, Any]
+) -> tuple[dict[str, Any], EventFactory, str]:
+    """A catalogued flight as a realistic autopilot of ``vehicle`` delivers it (its GNSS
+    mode kept: the realism is the autopilot's, the receiver's mode is the scenario's)."""
+    from companion.sim.realism import realistic
+
+    base, factory, desc = _CATALOGUE[name]
+    over = {k: v for k, v in realistic(vehicle).items() if k != "gnss_mode"}
+    return {**base, **over, **extra}, factory, f"{desc}; as a realistic {label} delivers it"
+
+
+_REALISTIC_VARIANTS: dict[str, tuple[Any, ...]] = {
+    "taxi_realistic": ("taxi", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "approach_rtk20_realistic": ("approach_rtk20", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "cruise_gnss_loss_realistic": ("cruise_gnss_loss", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "nominal_realistic": ("nominal", "plane", "ArduPlane (RAW_IMU 10 Hz)"),
+    "copter_realistic": ("px4_rotorcraft", "copter", "ArduCopter on a serial port (50 Hz)"),
+    "copter_radio_realistic": (
+        "px4_rotorcraft", "copter_radio", "ArduCopter through a telemetry radio (~1 Hz)",
+    ),
+    "px4_rotorcraft_realistic": (
+        "px4_rotorcraft", "px4", "PX4 (HIGHRES_IMU 250 Hz; the first 150 s)",
+        {"duration_s": 150.0},
+    ),
+}  # fmt: skip
+"""Realistic variants of the bundled flights (companion.sim.realism's profiles)."""
+for _name, (_base, _vehicle, _label, *_extra) in _REALISTIC_VARIANTS.items():
+    _CATALOGUE[_name] = _realistic_variant(_base, _vehicle, _label, *(_extra or [{}]))
 
 SCENARIO_NAMES: tuple[str, ...] = tuple(_CATALOGUE)
 """The named scenarios :func:`make_scenario` knows."""

@@ -77,7 +77,7 @@ def truth_rows(flight: SimFlight) -> list[str]:
         rows.append(
             f"{t[k]:.6f},{math.degrees(lat[k]):.10f},{math.degrees(lon[k]):.10f},{alt[k]:.4f},"
             f"{v[0]:.5f},{v[1]:.5f},{v[2]:.5f},{eul[k, 0]:.5f},{eul[k, 1]:.5f},{eul[k, 2]:.5f},"
-            f"{phase[k]},{gnss_state(sc, 0, float(t[k])).label}"
+            f"{phase[k]},{gnss_state(flight.truth.scenario, 0, float(t[k])).label}"
         )
     return rows
 
