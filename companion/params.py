@@ -114,6 +114,9 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENG_POT_COMBINE", "engine.potential_combine"),
     ("ENG_INERTIAL_REF", "engine.inertial_reference"),
     ("ENG_POT_FIX_TEST", "engine.potential_fix_test"),
+    ("ENG_SILENCE", "engine.silence_timeout_s"),
+    ("ENG_NOGNSS", "engine.no_gnss_alert_s"),
+    ("ENG_NOGNSS_REP", "engine.no_gnss_repeat_s"),
     # [outage]
     ("OUT_GNSS_TIMEOUT", "outage.gnss_timeout_s"),
     ("OUT_MIN_FIX_TYPE", "outage.min_fix_type"),
