@@ -228,6 +228,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("INT_ATTRIB_PROB", "integrity.attribution_error_prob"),
     ("INT_DEF_VEL_VAR", "integrity.default_vel_var_m2ps2"),
     ("INT_REF_MAX_AGE", "integrity.reference_max_age_s"),
+    ("INT_RESTORE_DWL", "integrity.integrity_restore_dwell_s"),
     # [integrity.phase]
     ("PHS_GROUND_HGT", "integrity.phase.ground_height_m"),
     ("PHS_LANDING_HGT", "integrity.phase.landing_height_m"),
@@ -235,6 +236,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("PHS_VERT_SPEED", "integrity.phase.vertical_speed_mps"),
     ("PHS_TAXI_MAX_SPD", "integrity.phase.taxi_max_speed_mps"),
     ("PHS_STATIONARY", "integrity.phase.stationary_speed_mps"),
+    ("PHS_DWELL", "integrity.phase.dwell_s"),
     # [potential]
     ("POT_WINDOW", "potential.window_s"),
     ("POT_MAX_SOURCES", "potential.max_sources"),

@@ -97,7 +97,9 @@ LIVE_KEYS: dict[str, frozenset[str]] = {
     ),
     "outage": frozenset(f.name for f in dataclasses.fields(OutageConfig)),
     "heading": frozenset({"auto_apply", "publish_period_s"}),
-    "integrity": frozenset({"approach_category", "category_upgrade_dwell_s"}),
+    "integrity": frozenset(
+        {"approach_category", "category_upgrade_dwell_s", "integrity_restore_dwell_s"}
+    ),
 }
 """The configuration keys :meth:`Engine.reconfigure` applies to the running estimators,
 by block: those read where they are used (never turned into state when an estimator
