@@ -174,6 +174,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("HDG_MAX_EXTRAP", "heading.max_extrapolation_s"),
     ("HDG_GND_MAX_HGT", "heading.ground_max_height_m"),
     ("HDG_GND_MAX_CLMB", "heading.ground_max_climb_mps"),
+    ("HDG_PARK_SUSPECT", "heading.park_suspect_bias_mps"),
+    ("HDG_SUSPECT_LEGS", "heading.suspect_min_legs"),
     # [blend]
     ("BLD_MODE", "blend.mode"),
     ("BLD_ADAPTIVE", "blend.adaptive"),
