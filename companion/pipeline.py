@@ -171,6 +171,8 @@ class Pipeline:
         self._data_clock: tuple[float, float] | None = None
         """(``t_rx_s``, autopilot ``t_s``) of the newest data sample: the driver's clock
         mapped onto the engine's while no sample comes."""
+        self._inertial_clock = False
+        """:attr:`_data_clock` is from an IMU or attitude sample (not a fix's validity time)."""
 
     # ------------------------------------------------------------------ in
 
@@ -196,11 +198,15 @@ class Pipeline:
                 frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
             elif kind is RebootEvent:
                 self._data_clock = None
+                self._inertial_clock = False
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
-                if kind in DATA_KINDS:
+                if kind in DATA_KINDS and (kind is not GnssFix or not self._inertial_clock):
+                    # a fix's time is its time of validity, before its arrival by the
+                    # receiver's latency: the inertial streams carry the clock when they run
                     self._data_clock = (t_rx_s, sample.t_s)
+                    self._inertial_clock = kind is not GnssFix
             outputs = handle(sample)
             if outputs:
                 for out in outputs:
