@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.engine import Engine
+from companion.engine import Engine, EngineConfig
 from companion.mavlink.tlog import TlogReader
 from companion.pipeline import NAV_NO_GNSS, NAV_SILENT
 from companion.replay import replay
@@ -41,6 +41,7 @@ EPOCH0_S = json.loads((FIXTURES / "cruise_gnss_loss.json").read_text())["epoch0_
 """UNIX time of the simulation's boot-clock zero."""
 MSG_GPS_RAW_INT = 24
 MSG_HEARTBEAT = 0
+SILENCE_TIMEOUT_S = EngineConfig().silence_timeout_s
 DATA_IDS = frozenset({24, 27, 30})
 """GPS_RAW_INT, RAW_IMU, ATTITUDE: the fixture's navigation data."""
 CHI_2D_99 = math.sqrt(-2.0 * math.log(0.01))
@@ -141,11 +142,11 @@ def test_a_silence_in_a_replayed_log_gives_its_alerts_at_their_log_times(silence
     texts = [(t, m.text) for t, m in TlogReader(out) if m.get_type() == "STATUSTEXT"]
     during = [(t, text.split()[1]) for t, text in texts if last_fix < t < back]
     codes = [code for _, code in during]
-    # GNSS_LOST within 1.5 s of the last fix; NO_DATA at the silence timeout (3 s), in log time
+    # GNSS_LOST within 1.5 s of the last fix; NO_DATA at the silence timeout, in log time
     lost = next(t for t, code in during if code == "GNSS_LOST")
     assert lost - last_fix <= 1.5
     no_data = next(t for t, code in during if code == "NO_DATA")
-    assert no_data - last_data == pytest.approx(3.0, abs=0.02)
+    assert no_data - last_data == pytest.approx(SILENCE_TIMEOUT_S, abs=0.02)
     assert codes.count("NO_DATA") == 1
     data_back = [t for t, text in texts if text.startswith("CMP DATA_BACK")]
     assert data_back == [pytest.approx(back, abs=1e-6)]
@@ -259,7 +260,7 @@ def test_the_engine_restarts_from_the_first_fix_after_a_silence_nothing_jumps():
         pytest.approx(1.0, abs=1e-3)
     ]
     assert [a.t_s - last_data for a in alerts(out_gap, AlertCode.NO_DATA)] == [
-        pytest.approx(3.0, abs=1e-3)
+        pytest.approx(SILENCE_TIMEOUT_S, abs=1e-3)
     ]
     assert not [o for o in out_gap if isinstance(o, NavSolution)]
     assert engine.watch.silent and out

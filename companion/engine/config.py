@@ -57,11 +57,11 @@ class EngineConfig:
     acceleration, so the test trips at manoeuvre onsets (turns, rotation) where the blend's
     innovation test, with the IMU, does not."""
 
-    silence_timeout_s: float = ranged(3.0, gt=0.0, le=60.0)
+    silence_timeout_s: float = ranged(2.0, gt=0.0, le=60.0)
     """No IMU, attitude or GNSS sample from the autopilot for this long is a silence:
     ``NO_DATA``, no position published, and the navigation restarts from the first fix
-    after it (``DATA_BACK``). Three missed 1 Hz heartbeats' worth, far above any gap
-    between the samples of a live stream."""
+    after it (``DATA_BACK``). Far above the gaps of a live stream (10-50 Hz), twice those
+    of a 1 Hz telemetry recording."""
     no_gnss_alert_s: float = ranged(3.0, gt=0.0, le=60.0)
     """No usable fix this long after the autopilot's first sample (or after a silence):
     ``NO_GNSS``, the service is not navigating."""
