@@ -37,8 +37,6 @@ class StreamWatch:
         """Time of the newest navigation data sample (s, autopilot clock)."""
         self.silent = False
         """True from ``NO_DATA`` until the next data sample."""
-        self.silent_since_s: float | None = None
-        """Time of the last data sample before the current (or last) silence."""
         self._wait_start_t_s: float | None = None
         """Start of the wait for a first usable fix (first sample, or the end of a silence);
         None once the navigation runs."""
@@ -90,7 +88,6 @@ class StreamWatch:
         announced = self.no_gnss_announced
         self._wait_start_t_s = None
         self.no_gnss_due_s = math.inf
-        """When ``NO_GNSS`` is next due (autopilot clock, s; inf: not waiting)."""
         self.no_gnss_announced = 0
         if not announced:
             return []
@@ -113,7 +110,6 @@ class StreamWatch:
         last = self.last_data_t_s
         if not self.silent and last is not None and t_s - last >= self.silence_timeout_s:
             self.silent = True
-            self.silent_since_s = last
             text = f"no IMU, attitude or GNSS from the autopilot for {t_s - last:.1f} s"
             alerts.append(Alert(t_s, AlertCode.NO_DATA, Severity.CRITICAL, text))
         if t_s >= self.no_gnss_due_s and self._wait_start_t_s is not None:
