@@ -114,6 +114,9 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENG_POT_COMBINE", "engine.potential_combine"),
     ("ENG_INERTIAL_REF", "engine.inertial_reference"),
     ("ENG_POT_FIX_TEST", "engine.potential_fix_test"),
+    ("ENG_SILENCE", "engine.silence_timeout_s"),
+    ("ENG_NOGNSS", "engine.no_gnss_alert_s"),
+    ("ENG_NOGNSS_REP", "engine.no_gnss_repeat_s"),
     # [outage]
     ("OUT_GNSS_TIMEOUT", "outage.gnss_timeout_s"),
     ("OUT_MIN_FIX_TYPE", "outage.min_fix_type"),
@@ -171,6 +174,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("HDG_MAX_EXTRAP", "heading.max_extrapolation_s"),
     ("HDG_GND_MAX_HGT", "heading.ground_max_height_m"),
     ("HDG_GND_MAX_CLMB", "heading.ground_max_climb_mps"),
+    ("HDG_PARK_SUSPECT", "heading.park_suspect_bias_mps"),
+    ("HDG_SUSPECT_LEGS", "heading.suspect_min_legs"),
     # [blend]
     ("BLD_MODE", "blend.mode"),
     ("BLD_ADAPTIVE", "blend.adaptive"),
@@ -225,6 +230,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("INT_ATTRIB_PROB", "integrity.attribution_error_prob"),
     ("INT_DEF_VEL_VAR", "integrity.default_vel_var_m2ps2"),
     ("INT_REF_MAX_AGE", "integrity.reference_max_age_s"),
+    ("INT_RESTORE_DWL", "integrity.integrity_restore_dwell_s"),
     # [integrity.phase]
     ("PHS_GROUND_HGT", "integrity.phase.ground_height_m"),
     ("PHS_LANDING_HGT", "integrity.phase.landing_height_m"),
@@ -232,6 +238,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("PHS_VERT_SPEED", "integrity.phase.vertical_speed_mps"),
     ("PHS_TAXI_MAX_SPD", "integrity.phase.taxi_max_speed_mps"),
     ("PHS_STATIONARY", "integrity.phase.stationary_speed_mps"),
+    ("PHS_DWELL", "integrity.phase.dwell_s"),
     # [potential]
     ("POT_WINDOW", "potential.window_s"),
     ("POT_MAX_SOURCES", "potential.max_sources"),

@@ -56,11 +56,14 @@ from companion.params import LIVE_KEYS, ParamServer
 from companion.types import (
     Alert,
     AlertCode,
+    AttitudeSample,
     AutopilotFlavour,
     CommandOutcome,
     CommandResult,
+    GnssFix,
     HeadingCommand,
     HeartbeatSample,
+    ImuSample,
     NavMode,
     Output,
     RebootEvent,
@@ -69,6 +72,8 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
+ROUND_TRIP_S = 1e-5
+"""An engine due time mapped to the driver's clock and back may come back this early, s."""
 RATE_CHECK_PERIOD_S = 10.0
 """How often the received rates are compared with the requested ones (autopilot time)."""
 STREAM_NEEDS: dict[str, tuple[str, ...]] = {
@@ -85,6 +90,23 @@ MAV_RESULTS: dict[CommandOutcome, int] = {
     CommandOutcome.FAILED: MAV_RESULT_FAILED,
 }
 """The engine's answer to a command -> COMMAND_ACK.result."""
+DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
+"""Samples that carry the autopilot clock forward (HEARTBEAT and the like take its latest
+time): the driver's clock is mapped onto the autopilot's by the newest of them."""
+NAV_STATES: dict[NavMode, int] = {
+    NavMode.INIT: 0,
+    NavMode.NORMAL: 1,
+    NavMode.DEGRADED: 2,
+    NavMode.BRIDGING: 3,
+    NavMode.REACQUIRING: 4,
+    NavMode.LOST: 5,
+}
+"""Our HEARTBEAT's ``custom_mode``: the navigation state (docs/mavlink.md), with
+:data:`NAV_NO_GNSS` and :data:`NAV_SILENT`."""
+NAV_NO_GNSS = 6
+"""``custom_mode`` while ``NO_GNSS`` stands: no usable fix, not navigating."""
+NAV_SILENT = 7
+"""``custom_mode`` while ``NO_DATA`` stands: the autopilot sends no data, not navigating."""
 COMMAND_ALERTS = frozenset(
     {AlertCode.HDG_APPLIED, AlertCode.HDG_REJECT, AlertCode.HDG_UNDONE, AlertCode.HDG_CMD}
 )
@@ -146,6 +168,11 @@ class Pipeline:
         self.params = ParamServer(self.config, self.config.encoder.dialect)
         """The parameter protocol (companion.params): its ``overrides`` are what the
         driver persists whenever its ``changes`` move."""
+        self._data_clock: tuple[float, float] | None = None
+        """(``t_rx_s``, autopilot ``t_s``) of the newest data sample: the driver's clock
+        mapped onto the engine's while no sample comes."""
+        self._inertial_clock = False
+        """:attr:`_data_clock` is from an IMU or attitude sample (not a fix's validity time)."""
 
     # ------------------------------------------------------------------ in
 
@@ -170,9 +197,16 @@ class Pipeline:
             if kind is HeartbeatSample:
                 frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
             elif kind is RebootEvent:
+                self._data_clock = None
+                self._inertial_clock = False
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
+                if kind in DATA_KINDS and (kind is not GnssFix or not self._inertial_clock):
+                    # a fix's time is its time of validity, before its arrival by the
+                    # receiver's latency: the inertial streams carry the clock when they run
+                    self._data_clock = (t_rx_s, sample.t_s)
+                    self._inertial_clock = kind is not GnssFix
             outputs = handle(sample)
             if outputs:
                 for out in outputs:
@@ -191,19 +225,54 @@ class Pipeline:
 
     def next_due_s(self) -> float:
         """When :meth:`on_timer` next has something to send, on the driver's ``t_rx_s``
-        clock (s); ``-inf`` before the first call: due at once."""
-        return min(self._next_heartbeat_s, self.params.next_due_s())
+        clock (s); ``-inf`` before the first call: due at once. The engine's due time
+        (:meth:`Engine.next_due_s`, autopilot clock) is mapped through the newest data
+        sample: a silence's alerts come at their time, not with the next message."""
+        return min(self._next_heartbeat_s, self.params.next_due_s(), self._engine_due_rx_s())
+
+    def _engine_due_rx_s(self) -> float:
+        clock = self._data_clock
+        if clock is None:
+            return math.inf
+        due_s = self.engine.next_due_s()
+        if not math.isfinite(due_s):
+            return math.inf
+        rx0, t0 = clock
+        return rx0 + (due_s - t0)
 
     def on_timer(self, t_rx_s: float) -> list[bytes]:
-        """The periodic output due at ``t_rx_s`` (nothing when called early): the next
+        """The periodic output due at ``t_rx_s`` (nothing when called early): what the
+        engine raises when no sample comes (:meth:`Engine.on_clock`: GNSS_LOST, NO_DATA,
+        NO_GNSS at their time; streams are requested again when the data stops), the next
         PARAM_VALUEs of a parameter list being sent, and our HEARTBEAT, the next one a
-        heartbeat period after ``t_rx_s``. A replay calls it before the first message
-        received at or after :meth:`next_due_s`, the service when its timer wakes."""
-        frames = [self._pack(m) for m in self.params.on_timer(t_rx_s)]
+        heartbeat period after ``t_rx_s``. A replay calls it at each :meth:`next_due_s`
+        before the record that follows it, the service when its timer wakes."""
+        frames = self._engine_timer(t_rx_s)
+        frames += [self._pack(m) for m in self.params.on_timer(t_rx_s)]
         if t_rx_s < self._next_heartbeat_s:
             return frames
         self._next_heartbeat_s = t_rx_s + self._heartbeat_period_s
         frames.append(self.heartbeat())
+        return frames
+
+    def _engine_timer(self, t_rx_s: float) -> list[bytes]:
+        clock = self._data_clock
+        if clock is None:
+            return []
+        engine = self.engine
+        due_s = engine.next_due_s()
+        rx0, t0 = clock
+        t_s = t0 + (t_rx_s - rx0)
+        # the round trip through the driver's clock (UNIX time: 0.2 us resolution) may
+        # land a hair before the due time: fire at the due time itself
+        if not t_s >= due_s - ROUND_TRIP_S:
+            return []
+        silent = engine.watch.silent
+        frames: list[bytes] = []
+        for out in engine.on_clock(max(t_s, due_s)):
+            frames += self._encode(out)
+        if engine.watch.silent and not silent:
+            frames += self._request_streams()  # a stopped stream may be a reset stream rate
         return frames
 
     # ------------------------------------------------------------------ parameters
@@ -272,15 +341,23 @@ class Pipeline:
     # ------------------------------------------------------------------ out
 
     def heartbeat(self) -> bytes:
-        """Our HEARTBEAT, with system_status from the navigation's health."""
-        mode = self.engine.outage.mode
-        if mode is NavMode.LOST:
-            status = MAV_STATE_CRITICAL
+        """Our HEARTBEAT: ``system_status`` from the navigation's health (ACTIVE while
+        navigating, STANDBY before the first fix, CRITICAL when lost, silent or without
+        GNSS), ``custom_mode`` the navigation state (:data:`NAV_STATES`)."""
+        engine = self.engine
+        watch = engine.watch
+        mode = engine.outage.mode
+        if watch.silent:
+            status, state = MAV_STATE_CRITICAL, NAV_SILENT
+        elif watch.waiting and watch.no_gnss_announced:
+            status, state = MAV_STATE_CRITICAL, NAV_NO_GNSS
+        elif mode is NavMode.LOST:
+            status, state = MAV_STATE_CRITICAL, NAV_STATES[mode]
         elif mode is NavMode.INIT:
-            status = MAV_STATE_STANDBY
+            status, state = MAV_STATE_STANDBY, NAV_STATES[mode]
         else:
-            status = MAV_STATE_ACTIVE
-        return self._pack(self.encoder.heartbeat(status))
+            status, state = MAV_STATE_ACTIVE, NAV_STATES[mode]
+        return self._pack(self.encoder.heartbeat(status, state))
 
     @property
     def flavour(self) -> AutopilotFlavour:

@@ -1,9 +1,11 @@
 """Replay a recorded flight (.tlog) through the service, as fast as the CPU allows.
 
 Every message the service would send is written to the output .tlog, stamped
-with the input log's time of the message that caused it; the pipeline's periodic
-output (our HEARTBEAT, ``link.heartbeat_rate_hz`` of log time) is written when the
-first record at or after its due time is read, before that record's output. The
+with the input log's time of the message that caused it; what the pipeline sends
+on its timer (our HEARTBEAT, ``link.heartbeat_rate_hz`` of log time; the alerts due
+while no message comes: GNSS_LOST, NO_DATA, NO_GNSS) is sent at its due time, in log
+time, before the next record, as the live service's timer would: a silence in the log
+produces its alerts when they were due, not when the next record arrives. The
 replay is deterministic: the same input and configuration give byte-identical
 output (docs/replay.md).
 """
@@ -82,16 +84,22 @@ def replay(
     with TlogWriter(out_path) as writer:
         for t_rx_s, msg in itertools.chain((first_record,), records):
             if first_t is None:
-                first_t = t_rx_s
-            last_t = t_rx_s
-            if t_rx_s >= due_s:
-                frames = pipeline.on_timer(t_rx_s)
+                first_t = last_t = t_rx_s
+            while due_s <= t_rx_s:
+                # at its due time (the first is due at once: at the first record)
+                t_due_s = max(due_s, last_t)
+                frames = pipeline.on_timer(t_due_s)
                 if frames:
-                    writer.write_frames(t_rx_s, frames)
-                due_s = pipeline.next_due_s()
+                    writer.write_frames(t_due_s, frames)
+                next_s = pipeline.next_due_s()
+                if not next_s > due_s:  # nothing moved it on: leave it to the next record
+                    break
+                due_s = next_s
+            last_t = t_rx_s
             frames = pipeline.on_message(msg, t_rx_s)
             if frames:
                 writer.write_frames(t_rx_s, frames)
+            due_s = pipeline.next_due_s()
             count += 1
             if progress is not None and count % PROGRESS_EVERY_MESSAGES == 0:
                 progress(f"{in_path.name}: {count} messages, {t_rx_s - first_t:.0f} s of flight")

@@ -137,6 +137,9 @@ class AlertCode(enum.Enum):
     HDG_UNDONE = "HDG_UNDONE"
     HDG_RESTORED = "HDG_RESTORED"
     HDG_CMD = "HDG_CMD"
+    NO_DATA = "NO_DATA"
+    DATA_BACK = "DATA_BACK"
+    NO_GNSS = "NO_GNSS"
 
 
 class HeadingAction(enum.Enum):

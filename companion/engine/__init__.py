@@ -5,7 +5,8 @@
 * :mod:`~companion.engine.config`: :class:`EngineConfig`, the ``[engine]`` block;
 * :mod:`~companion.engine.navigators`: which navigator carries the solution;
 * :mod:`~companion.engine.bridge`: the position-potential filter through GNSS gaps;
-* :mod:`~companion.engine.publish`: what a publication tick publishes.
+* :mod:`~companion.engine.publish`: what a publication tick publishes;
+* :mod:`~companion.engine.silence`: the autopilot's data silent, no GNSS at all.
 """
 
 from companion.engine.config import NAVIGATORS, EngineConfig

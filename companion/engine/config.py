@@ -57,6 +57,17 @@ class EngineConfig:
     acceleration, so the test trips at manoeuvre onsets (turns, rotation) where the blend's
     innovation test, with the IMU, does not."""
 
+    silence_timeout_s: float = ranged(2.0, gt=0.0, le=60.0)
+    """No IMU, attitude or GNSS sample from the autopilot for this long is a silence:
+    ``NO_DATA``, no position published, and the navigation restarts from the first fix
+    after it (``DATA_BACK``). Far above the gaps of a live stream (10-50 Hz), twice those
+    of a 1 Hz telemetry recording."""
+    no_gnss_alert_s: float = ranged(3.0, gt=0.0, le=60.0)
+    """No usable fix this long after the autopilot's first sample (or after a silence):
+    ``NO_GNSS``, the service is not navigating."""
+    no_gnss_repeat_s: float = ranged(30.0, gt=0.0)
+    """``NO_GNSS`` is repeated at this interval while no usable fix arrives."""
+
     def __post_init__(self) -> None:
         check_ranges(self)
         if self.status_rate_hz > self.publish_rate_hz:

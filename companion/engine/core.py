@@ -42,6 +42,7 @@ from companion.engine.bridge import PotentialBridge
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
 from companion.engine.publish import Publisher, publication_time_s, tick
+from companion.engine.silence import StreamWatch
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.blend import BlendConfig, BlendNavigator
@@ -73,6 +74,10 @@ log = logging.getLogger(__name__)
 
 OUTAGE_TICK_S = 0.05
 """Outage-clock resolution (s): GNSS_LOST is raised within this of its timeout."""
+DUE_EPS_S = 1e-6
+""":meth:`Engine.next_due_s` is this after a strict timeout (``> gnss_timeout_s``)."""
+_DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
+"""Samples whose absence for ``silence_timeout_s`` is a silence (:mod:`.silence`)."""
 
 _HEADING_CODES = frozenset(
     {
@@ -92,7 +97,9 @@ LIVE_KEYS: dict[str, frozenset[str]] = {
     ),
     "outage": frozenset(f.name for f in dataclasses.fields(OutageConfig)),
     "heading": frozenset({"auto_apply", "publish_period_s"}),
-    "integrity": frozenset({"approach_category", "category_upgrade_dwell_s"}),
+    "integrity": frozenset(
+        {"approach_category", "category_upgrade_dwell_s", "integrity_restore_dwell_s"}
+    ),
 }
 """The configuration keys :meth:`Engine.reconfigure` applies to the running estimators,
 by block: those read where they are used (never turned into state when an estimator
@@ -110,6 +117,8 @@ class EngineStats:
     solutions: int = 0
     reboots: int = 0
     reanchors: int = 0
+    silences: int = 0
+    """Silences ended by data (each restarted the navigation)."""
 
 
 class Engine:
@@ -156,28 +165,39 @@ class Engine:
     def _reset(self) -> None:
         """Everything of one autopilot boot, from scratch (at start and after a reboot)."""
         cfg = self.config
-        self.navigators = Navigators(cfg.navigator, self._blend_config, cfg.imu_timeout_s)
-        self.outage = OutageMonitor(self._outage_config)
-        """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity = IntegrityMonitor(self._integrity_config)
-        self.bridge = PotentialBridge(cfg, self._potential_config)
-        self.publisher = Publisher(cfg.status_rate_hz, self.outage, self.integrity, self.bridge)
-        self.coast: InertialCoast | None = None
-        """The free-inertial references (with the blend, once the frame exists)."""
+        self._restart_navigation()
+        self.watch = StreamWatch(cfg.silence_timeout_s, cfg.no_gnss_alert_s, cfg.no_gnss_repeat_s)
+        """Silence of the autopilot's data and no GNSS at all (:mod:`.silence`)."""
         self._landed: LandedState | None = None
         self._airborne = False
-        self._speed_mps: float | None = None
-        """Ground speed of the last published state (the stale-fix test's motion)."""
-        self._rx_last_usable_t_s: dict[int, float] = {}
-        self.frame: LocalFrame | None = None
         self.now_s: float | None = None
         self._publish_tick = -1
-        self._next_outage_tick_s = -math.inf
         self._yaw_rad: float | None = None
         """The autopilot's latest heading (ATTITUDE), uncorrected."""
         self._attitude: AttitudeSample | None = None
         """The latest attitude sample (taken again when the heading correction changes)."""
         self.heading = HeadingCorrector(self._heading_config)
+
+    def _restart_navigation(self) -> None:
+        """The navigation from scratch, started again by the next usable fix (at start,
+        after a reboot, after a silence): navigators, outage monitor, integrity monitor
+        (its counters kept), bridge, publisher, local frame and inertial references. The
+        heading correction, the landed state and the clocks are the caller's."""
+        cfg = self.config
+        self.navigators = Navigators(cfg.navigator, self._blend_config, cfg.imu_timeout_s)
+        self.outage = OutageMonitor(self._outage_config)
+        """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
+        self.integrity.reset()
+        self.bridge = PotentialBridge(cfg, self._potential_config)
+        self.publisher = Publisher(cfg.status_rate_hz, self.outage, self.integrity, self.bridge)
+        self.coast: InertialCoast | None = None
+        """The free-inertial references (with the blend, once the frame exists)."""
+        self._speed_mps: float | None = None
+        """Ground speed of the last published state (the stale-fix test's motion)."""
+        self._rx_last_usable_t_s: dict[int, float] = {}
+        self.frame: LocalFrame | None = None
+        self._next_outage_tick_s = -math.inf
 
     # ------------------------------------------------------------------ entry point
 
@@ -188,9 +208,23 @@ class Engine:
             return restored + self.handle(sample)
         kind = type(sample)
         self._sample_counts[kind] += 1
+        t_s = sample.t_s
+        watch = self.watch
+        resumed: list[Output] = []
+        if kind in _DATA_KINDS:
+            silence_s = watch.on_data(t_s)
+            if silence_s is not None:
+                resumed = self._after_silence(t_s, silence_s)
+        elif kind is RebootEvent and watch.silent:
+            text = "autopilot rebooted: navigation restarts from the next fix"
+            resumed = [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []
-        t_s = sample.t_s
+        if resumed:
+            outputs = resumed + outputs
+        watch = self.watch  # a new one after a reboot
+        if not watch.started:
+            watch.start(t_s)
         now = self.now_s
         if now is None or t_s > now:
             self.now_s = now = t_s
@@ -205,8 +239,57 @@ class Engine:
             if tick > self._publish_tick:
                 self._publish_tick = tick
                 outputs += self._publish(now)
+        if watch.waiting:
+            if self.outage.mode is not NavMode.INIT:
+                outputs += watch.navigating(now)
+            elif now >= watch.no_gnss_due_s:
+                outputs += watch.tick(now)
         if not outputs:
             return outputs
+        self._account(outputs)
+        return outputs
+
+    # ------------------------------------------------------------------ clock
+
+    def next_due_s(self) -> float:
+        """When :meth:`on_clock` next has something to raise, on the autopilot clock (s;
+        ``inf``: nothing until the next sample): ``GNSS_LOST`` or ``LOST`` of the outage
+        monitor, ``NO_DATA`` or ``NO_GNSS`` (:mod:`.silence`)."""
+        due = self.watch.next_due_s()
+        outage = self.outage
+        last = outage.last_fused_t_s
+        if last is not None:
+            if outage.mode in (NavMode.NORMAL, NavMode.DEGRADED):
+                due = min(due, last + outage.config.gnss_timeout_s + DUE_EPS_S)
+            elif outage.mode in (NavMode.BRIDGING, NavMode.REACQUIRING):
+                due = min(due, last + outage.config.max_bridge_s + DUE_EPS_S)
+        return due
+
+    def on_clock(self, t_s: float) -> list[Output]:
+        """The autopilot clock reached ``t_s`` with no sample (a driver's timer during a
+        silence, at :meth:`next_due_s`): the outage monitor's and the silence watch's
+        alerts that are due. Publishes nothing: without data there is nothing to carry
+        the solution with, and after ``silence_timeout_s`` the navigation restarts."""
+        outputs: list[Output] = []
+        if self.outage.last_fused_t_s is not None:
+            outputs += self.outage.tick(t_s)
+        outputs += self.watch.tick(t_s)
+        if outputs:
+            self._account(outputs)
+        return outputs
+
+    def _after_silence(self, t_s: float, silence_s: float) -> list[Output]:
+        """The first data sample after ``silence_s`` of none: the navigation restarts from
+        the next usable fix (nothing carried across the silence); ``DATA_BACK``."""
+        log.warning("data back after %.1f s of silence: navigation restarts", silence_s)
+        self.stats.silences += 1
+        self._restart_navigation()
+        self.watch.restarted(t_s)
+        text = f"after {silence_s:.1f} s: navigation restarts from the next fix"
+        return [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
+
+    def _account(self, outputs: list[Output]) -> None:
+        """Count the alerts among ``outputs``; a heading change moves the navigators."""
         for out in outputs:
             if isinstance(out, Alert):
                 self.stats.alerts[out.code.value] += 1
@@ -216,7 +299,6 @@ class Engine:
                     self._heading_applied()
                 elif out.code is AlertCode.HDG_UNDONE:
                     self._heading_undone()
-        return outputs
 
     # ------------------------------------------------------------------ handlers
 

@@ -51,6 +51,9 @@ class IntegrityConfig:
     """Rate of CMP_HPL / CMP_VPL / CMP_CAT and of the IntegrityReport (GNSS_INTEGRITY)."""
     category_upgrade_dwell_s: float = ranged(5.0, ge=0.0)
     """A better available category is announced after holding this long (downgrades at once)."""
+    integrity_restore_dwell_s: float = ranged(5.0, ge=0.0)
+    """Restored integrity is announced after holding this long (a loss at once): a
+    protection level hovering about its limit is one ``INTEGRITY lost``, not a stream."""
     attribution_error_prob: float = ranged(1e-4, gt=0.0, lt=1.0)
     """Probability that a consistent receiver is blamed for another's fault: with several
     receivers, a failed innovation test is pinned on one only if its NIS exceeds the

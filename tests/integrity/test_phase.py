@@ -70,3 +70,39 @@ def test_non_finite_state_keeps_the_phase() -> None:
 def test_config_validation(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match=next(iter(kwargs))):
         PhaseConfig(**kwargs)
+
+
+def test_a_parked_vehicle_with_a_vertical_speed_about_the_threshold_stays_taxiing() -> None:
+    """Parked 2 m above the field, the published vertical speed wandering about -1 m/s (the
+    threshold) as on the real ArduPlane log: without the dwell the phase flapped between taxi
+    and take-off at every crossing. A real climb still becomes TAKEOFF after the dwell."""
+    cfg = PhaseConfig(field_elevation_msl_m=FIELD)
+    rng = np.random.default_rng(3)
+    pc = PhaseClassifier(cfg)
+    phases = set()
+    t = 0.0
+    for _ in range(6000):  # 10 min at 10 Hz
+        vd = -1.0 + 0.1 * rng.standard_normal()
+        phases.add(pc.update(FIELD + 2.0, v(0.1, vd), None, t))
+        t += 0.1
+    assert phases == {FlightPhase.TAXI}
+    # the same without a time (no dwell): flaps, as before
+    flapping = PhaseClassifier(cfg)
+    seen = {
+        flapping.update(FIELD + 2.0, v(0.1, -1.0 + 0.1 * rng.standard_normal())) for _ in range(100)
+    }
+    assert FlightPhase.TAKEOFF in seen
+    # a real climb: take-off after the dwell, not before
+    t_climb = t
+    while pc.update(FIELD + 2.0 + 3.0 * (t - t_climb), v(2.0, -3.0), None, t) is FlightPhase.TAXI:
+        t += 0.1
+        assert t - t_climb < 10.0
+    assert pc.phase is FlightPhase.TAKEOFF
+    # (the candidate may have started with the last noisy samples, just before the climb)
+    assert cfg.dwell_s - 0.5 <= t - t_climb <= cfg.dwell_s + 0.15
+
+
+def test_the_autopilots_landed_state_is_taken_at_once() -> None:
+    pc = PhaseClassifier(PhaseConfig(field_elevation_msl_m=FIELD))
+    assert pc.update(FIELD, v(0.0, 0.0), LandedState.ON_GROUND, 0.0) is FlightPhase.TAXI
+    assert pc.update(FIELD + 3.0, v(0.0, -2.0), LandedState.TAKEOFF, 0.1) is FlightPhase.TAKEOFF

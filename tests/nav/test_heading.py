@@ -24,6 +24,7 @@ from companion.nav.heading import (
     RunningStats,
     yaw_rate_radps,
 )
+from companion.nav.heading.criteria import park_bias_verdict
 from companion.nav.rotations import wrap_pi
 from companion.types import (
     Alert,
@@ -423,14 +424,40 @@ def test_crab_step_between_legs_is_rejected() -> None:
         assert rej and rej[0].text.split()[0] in {"legs_differ", "trend", "dispersion"}
 
 
-def test_biased_gnss_velocity_is_caught_by_the_park_check() -> None:
+def test_a_persistent_velocity_bias_tolerated_when_parked_is_caught_in_motion() -> None:
+    """0.13 m/s of bias, parked and moving: the parking is only suspect (real receivers show
+    that much at standstill), the three legs the suspicion demands show the bias (its
+    cross-track part changes sign between opposite legs): rejected, never READY."""
     stream = taxi_stream(square_taxi(), seed=5, vel_noise_mps=0.05, vel_bias_ne_mps=(0.12, -0.05))
     hc = HeadingCorrector()
     out = run(hc, stream)
-    rej = alerts(out, AlertCode.HDG_REJECT)
-    assert rej and rej[0].text.startswith("gnss_vel_bias")
-    assert hc.park_ok is False
+    assert hc.park_ok is True and hc._park.suspect
     assert alerts(out, AlertCode.HDG_READY) == []
+    rej = alerts(out, AlertCode.HDG_REJECT)
+    assert rej and rej[0].text.split()[0] in {"legs_differ", "dispersion", "trend"}
+
+
+def standstill_bias_stream(bias_ne_mps: tuple[float, float], seed: int) -> TaxiStream:
+    """The square taxi with a GNSS velocity bias while parked only (as real receivers show)."""
+    biased = taxi_stream(square_taxi(), seed=seed, vel_noise_mps=0.05, vel_bias_ne_mps=bias_ne_mps)
+    clean = taxi_stream(square_taxi(), seed=seed, vel_noise_mps=0.05)
+    samples = [
+        b if b.t_s < PARK.duration_s else c
+        for b, c in zip(biased.samples, clean.samples, strict=True)
+    ]
+    return TaxiStream(samples, clean.turn_windows, clean.straight_legs)
+
+
+@pytest.mark.parametrize("seed", [5, 8])
+def test_a_standstill_velocity_bias_raises_no_reject_and_the_correction_is_right(seed) -> None:
+    """0.1 m/s at standstill only: no HDG_REJECT; READY with the injected 1 deg inside its 95 %
+    uncertainty (truth)."""
+    hc = HeadingCorrector()
+    out = run(hc, standstill_bias_stream((0.1, 0.0), seed))
+    assert alerts(out, AlertCode.HDG_REJECT) == []
+    assert alerts(out, AlertCode.HDG_READY) and hc.candidate is not None
+    err_deg = math.degrees(hc.candidate.correction_rad) - 1.0
+    assert abs(err_deg) <= math.degrees(hc.candidate.eps_rad)
 
 
 def test_biased_gnss_velocity_is_caught_by_the_legs_without_park_check() -> None:
@@ -455,17 +482,22 @@ def test_biased_gnss_velocity_is_caught_by_the_legs_without_park_check() -> None
 
 def test_park_verdict_false_alarm_and_detection_rates() -> None:
     """400 unbiased noisy parks (0.2 m/s, 10 s at 10 Hz): at most a few false alarms
-    (alpha = 0.001, binomial P(> 3) ~ 0.8 %); a 0.1 m/s bias under 0.05 m/s noise: always caught.
+    (alpha = 0.001, binomial P(> 3) ~ 0.8 %); a 0.1 m/s bias under 0.05 m/s noise: tolerated
+    by the check, always caught as suspect (above ``park_suspect_bias_mps``); 0.3 m/s fails.
     """
     hc = HeadingCorrector()
+    cfg = hc.config
     rng = np.random.default_rng(16)
     false = sum(not hc.park_verdict(0.2 * rng.standard_normal((100, 2))).ok for _ in range(400))
     assert false <= 3
-    caught = sum(
-        not hc.park_verdict(np.array([0.08, -0.06]) + 0.05 * rng.standard_normal((100, 2))).ok
-        for _ in range(100)
+    parks = [np.array([0.08, -0.06]) + 0.05 * rng.standard_normal((100, 2)) for _ in range(100)]
+    assert all(hc.park_verdict(p).ok for p in parks)
+    suspect = sum(
+        not park_bias_verdict(p, cfg.park_alpha, cfg.park_suspect_bias_mps).ok for p in parks
     )
-    assert caught == 100
+    assert suspect == 100
+    big = np.array([0.3, 0.0]) + 0.05 * rng.standard_normal((100, 2))
+    assert not hc.park_verdict(big).ok
 
 
 def test_unbiased_park_passes_and_missing_park_blocks_ready() -> None:

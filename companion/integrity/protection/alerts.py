@@ -70,6 +70,8 @@ class AlertState:
         self.phase = FlightPhase.TAXI
         self.integrity_ok = False
         self._integrity_announced: bool | None = None
+        self._ok_since_s = -math.inf
+        """Since when integrity has held without a break (for the restore dwell)."""
         self.category = ApproachCategory.NONE
         self._category_candidate = ApproachCategory.NONE
         self._category_candidate_since_s = -math.inf
@@ -92,7 +94,9 @@ class AlertState:
         """
         cfg = self.config
         t = solution.t_s
-        self.phase = self._phase_classifier.update(solution.alt_msl_m, solution.vel_ned_mps, landed)
+        self.phase = self._phase_classifier.update(
+            solution.alt_msl_m, solution.vel_ned_mps, landed, t
+        )
         pl = protection_levels(solution.pos_cov_ned_m2, self.k_h, self.k_v)
         self.levels = pl
         limit = alert_limit(self.phase, cfg.approach_category)
@@ -106,26 +110,37 @@ class AlertState:
             problems.append(f"VPL {pl.vpl_m:.1f} m > VAL {limit.val_m:.1f} m")
         if fault_unresolved:
             problems.append("unresolved fault")
+        was_ok = self.integrity_ok
         self.integrity_ok = not problems
+        if self.integrity_ok and not was_ok:
+            self._ok_since_s = t
         outputs: list[Output] = []
-        if self.integrity_ok != self._integrity_announced:
-            first = self._integrity_announced is None
-            self._integrity_announced = self.integrity_ok
-            where = f"({self.phase.value}, {limit.name})"
-            if not self.integrity_ok:
-                self.stats["integrity_alerts"] += 1
-                text = f"lost {where}: {'; '.join(problems)}"
-                log.warning("t=%.2f s integrity %s", t, text)
-                outputs.append(Alert(t, AlertCode.INTEGRITY, Severity.CRITICAL, text[:120]))
-            elif not first:
-                outputs.append(
-                    Alert(
-                        t,
-                        AlertCode.INTEGRITY,
-                        Severity.NOTICE,
-                        f"restored {where}: HPL {pl.hpl_m:.1f} m VPL {pl.vpl_m:.1f} m",
-                    )
+        announced = self._integrity_announced
+        where = f"({self.phase.value}, {limit.name})"
+        if not self.integrity_ok and announced is not False:
+            # a loss at once, once: not again until a restoration was announced
+            self._integrity_announced = False
+            self.stats["integrity_alerts"] += 1
+            text = f"lost {where}: {'; '.join(problems)}"
+            log.warning("t=%.2f s integrity %s", t, text)
+            outputs.append(Alert(t, AlertCode.INTEGRITY, Severity.CRITICAL, text[:120]))
+        elif self.integrity_ok and announced is None:
+            self._integrity_announced = True  # the first state: nothing was lost
+        elif (
+            self.integrity_ok
+            and announced is False
+            and t - self._ok_since_s >= cfg.integrity_restore_dwell_s
+        ):
+            # a restoration once it has held (a limit crossed back and forth is one loss)
+            self._integrity_announced = True
+            outputs.append(
+                Alert(
+                    t,
+                    AlertCode.INTEGRITY,
+                    Severity.NOTICE,
+                    f"restored {where}: HPL {pl.hpl_m:.1f} m VPL {pl.vpl_m:.1f} m",
                 )
+            )
         outputs += self._category_update(t, pl, fault_unresolved)
         tick = math.floor(t * cfg.report_rate_hz + 1e-6)
         if tick > self._report_tick:

@@ -20,6 +20,12 @@ Rules (first match wins):
 * otherwise EN-ROUTE. With no field elevation known the phase is EN-ROUTE
   in the air (the loosest airborne limit is not claimed tighter than known).
 
+A phase the rules give from the navigation state alone is taken only once they have
+given it for ``dwell_s`` without a break (sustained evidence: a vertical speed
+hovering about ``vertical_speed_mps`` on a parked vehicle must not make it flap between
+taxi, take-off and landing, each with its own alert limit); one the autopilot's landed
+state decides is taken at once, and so is the first.
+
 References
 ----------
 ICAO Doc 8168 (PANS-OPS): decision heights 200 ft CAT I, 100 ft CAT II;
@@ -62,6 +68,9 @@ class PhaseConfig:
     """Ground speed above which a ground run is a take-off roll or landing roll-out."""
     stationary_speed_mps: float = ranged(0.5, gt=0.0)
     """Below this ground speed a first solution with no landed state is taken as on ground."""
+    dwell_s: float = ranged(3.0, ge=0.0)
+    """A phase inferred from the navigation state (no landed state) is taken once the rules
+    have given it this long without a break, s."""
 
     def __post_init__(self) -> None:
         check_ranges(self)
@@ -75,17 +84,23 @@ class PhaseClassifier:
     def __init__(self, config: PhaseConfig | None = None) -> None:
         self.config = config or PhaseConfig()
         self.field_elevation_msl_m: float | None = self.config.field_elevation_msl_m
-        self.phase = FlightPhase.TAXI
-        self._been_airborne = False
+        self.reset()
 
     def reset(self) -> None:
         """Forget the phase and any learned field elevation."""
         self.field_elevation_msl_m = self.config.field_elevation_msl_m
         self.phase = FlightPhase.TAXI
         self._been_airborne = False
+        self._started = False
+        self._candidate = FlightPhase.TAXI
+        self._candidate_since_s = -math.inf
 
     def update(
-        self, alt_msl_m: float, vel_ned_mps: FloatArray, landed: LandedState | None = None
+        self,
+        alt_msl_m: float,
+        vel_ned_mps: FloatArray,
+        landed: LandedState | None = None,
+        t_s: float | None = None,
     ) -> FlightPhase:
         """Classify one state; returns (and keeps) the phase.
 
@@ -94,6 +109,7 @@ class PhaseClassifier:
         alt_msl_m : altitude, m MSL.
         vel_ned_mps : (3,) velocity, NED, m/s (down positive).
         landed : the autopilot's landed state, None when not reported.
+        t_s : the state's time, s (None: every phase is taken at once, no dwell).
         """
         cfg = self.config
         vn, ve, vd = (
@@ -116,7 +132,22 @@ class PhaseClassifier:
             if self.field_elevation_msl_m is not None
             else None
         )
-        self.phase = self._classify(height, speed, vd, landed)
+        been_airborne = self._been_airborne
+        phase = self._classify(height, speed, vd, landed)
+        if phase is not self._candidate:
+            self._candidate = phase
+            self._candidate_since_s = -math.inf if t_s is None else t_s
+        sure = (
+            not self._started
+            or t_s is None
+            or landed not in (None, LandedState.UNDEFINED)
+            or t_s - self._candidate_since_s >= self.config.dwell_s
+        )
+        self._started = True
+        if sure:
+            self.phase = phase
+        elif phase is not self.phase:
+            self._been_airborne = been_airborne  # not taken: nor what it implies
         return self.phase
 
     def _classify(

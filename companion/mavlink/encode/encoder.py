@@ -186,15 +186,21 @@ class Encoder:
             return self._integrity(out)
         raise ValueError(f"not an output: {type(out).__name__}")
 
-    def heartbeat(self, system_status: int) -> Any:
+    def heartbeat(self, system_status: int, custom_mode: int = 0) -> Any:
         """Our HEARTBEAT (MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID).
 
-        ``system_status`` is a MAV_STATE (0..8).
+        ``system_status`` is a MAV_STATE (0..8); ``custom_mode`` the navigation state
+        (docs/mavlink.md).
         """
         if not 0 <= system_status <= MAV_STATE_FLIGHT_TERMINATION:
             raise ValueError(f"system_status must be a MAV_STATE (0..8), got {system_status}")
         return self._mod.MAVLink_heartbeat_message(
-            MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, system_status, MAVLINK_VERSION
+            MAV_TYPE_ONBOARD_CONTROLLER,
+            MAV_AUTOPILOT_INVALID,
+            0,
+            custom_mode,
+            system_status,
+            MAVLINK_VERSION,
         )
 
     def command_ack(

@@ -133,7 +133,15 @@ class HeadingConfig:
         The parked speed is that of the mean GNSS velocity over this time, s
         (a single noisy fix must not end the parking).
     park_max_bias_mps
-        Largest tolerated GNSS velocity bias while parked, m/s.
+        Largest tolerated GNSS velocity bias while parked, m/s. Real receivers report
+        0.1-0.2 m/s at standstill (multipath, correlated over tens of seconds) that is not
+        there in motion; Markelov et al.'s parking stand allows 0.2 m/s of GNSS speed.
+    park_suspect_bias_mps
+        A significant parked bias above this (and at most ``park_max_bias_mps``) is not
+        a rejection but a suspicion: the sample then needs ``suspect_min_legs`` legs, so
+        that a bias that persists in motion shows between the legs' headings.
+    suspect_min_legs
+        Fewest legs judged after a suspect parked check (the leg test's second heading).
     park_alpha
         False-rejection probability of the parked bias test.
     auto_apply
@@ -186,7 +194,9 @@ class HeadingConfig:
     park_time_s: float = ranged(10.0, gt=0.0)
     park_window_s: float = ranged(30.0, gt=0.0)
     park_smooth_s: float = ranged(2.0, gt=0.0)
-    park_max_bias_mps: float = ranged(0.05, gt=0.0)
+    park_max_bias_mps: float = ranged(0.2, gt=0.0)
+    park_suspect_bias_mps: float = ranged(0.05, gt=0.0)
+    suspect_min_legs: int = ranged(3, ge=1)
     park_alpha: float = ranged(0.001, gt=0.0, lt=0.5)
     auto_apply: bool = False
     publish_period_s: float = ranged(1.0, ge=0.0)

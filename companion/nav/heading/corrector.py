@@ -459,7 +459,8 @@ class HeadingCorrector:
     def _maybe_judge(self, t_s: float) -> list[Output]:
         cfg = self.config
         est = self.estimate()
-        if est.n < self._min_cycles() or self._sample.full_legs < cfg.min_legs:
+        min_legs = max(cfg.min_legs, cfg.suspect_min_legs if self._park.suspect else 1)
+        if est.n < self._min_cycles() or self._sample.full_legs < min_legs:
             return []
         if math.degrees(est.eps_rad) > cfg.eps_limit_deg and est.n < cfg.max_cycles:
             return []

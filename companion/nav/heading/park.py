@@ -5,7 +5,12 @@ Parked: the mean GNSS velocity over the last ``park_smooth_s`` is at most
 it at once). After ``park_time_s`` parked, and every ``park_time_s`` after that,
 the velocities of the last ``park_window_s`` are tested for a bias
 (:func:`~companion.nav.heading.criteria.park_bias_verdict`; Markelov et al., the
-parking-stand check). The parked fixes also set the ground reference altitude.
+parking-stand check). A bias above ``park_max_bias_mps`` fails the check (announced
+once per parking, however often later checks of the same parking flip); a significant
+one above ``park_suspect_bias_mps`` only makes the parking *suspect*: real receivers
+report 0.1-0.2 m/s at standstill that is gone in motion, and the taxi's own leg test
+judges a bias that persists (the corrector then wants ``suspect_min_legs`` legs). The
+parked fixes also set the ground reference altitude.
 """
 
 from __future__ import annotations
@@ -35,7 +40,9 @@ class ParkCheck:
         self.ok: bool | None = None
         """Latest check: passed, failed, or ``None`` when not done."""
         self.reject_sent = False
-        """A failed check was announced (announced once until a check passes)."""
+        """A failed check of this parking was announced (once per parking)."""
+        self.suspect = False
+        """The latest check passed with a significant bias above ``park_suspect_bias_mps``."""
 
     def reset(self) -> None:
         """The parking ended (or the vehicle is airborne): the next one starts afresh."""
@@ -43,6 +50,7 @@ class ParkCheck:
         self._start_t = None
         self._vel.clear()
         self._last_eval_t = None
+        self.reject_sent = False
 
     def verdict(self, vel_ne_mps: np.ndarray) -> Verdict:
         """Is the mean of the GNSS velocities ``vel_ne_mps`` (shape (n, 2), m/s) a bias?"""
@@ -77,11 +85,17 @@ class ParkCheck:
         if self._last_eval_t is not None and fix.t_s - self._last_eval_t < cfg.park_time_s:
             return None
         self._last_eval_t = fix.t_s
-        verdict = self.verdict(np.array([[v[1], v[2]] for v in self._vel]))
+        vel = np.array([[v[1], v[2]] for v in self._vel])
+        verdict = self.verdict(vel)
         self.ok = verdict.ok
         if verdict.ok:
-            self.reject_sent = False
-            logger.info("parked GNSS velocity check passed: %s", verdict.details)
+            strict = park_bias_verdict(vel, cfg.park_alpha, cfg.park_suspect_bias_mps)
+            self.suspect = not strict.ok
+            logger.info(
+                "parked GNSS velocity check passed%s: %s",
+                " (bias suspect)" if self.suspect else "",
+                verdict.details,
+            )
             return None
         logger.warning("parked GNSS velocity check failed: %s", verdict.details)
         if self.reject_sent:
