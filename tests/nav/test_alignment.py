@@ -219,3 +219,38 @@ def test_nees_without_attitude_within_chi2_bounds() -> None:
     lo, hi = chi2.ppf([0.005, 0.995], 6 * n) / n
     assert lo < np.mean(values) < hi, (lo, np.mean(values), hi)
     assert gated_total <= 2
+
+
+def test_restart_keeps_the_blends_own_attitude() -> None:
+    """After a restart (the engine's re-initialisation) in motion, with no ATTITUDE and no
+    rest to level again, the blend starts at the next fix from its own attitude."""
+    traj = RestThenTurn()
+    _, checks, _, nav = _run(7, traj, duration_s=20.0)
+    assert nav.initialised
+    yaw_sigma_before = checks[-1][4]
+    t0 = nav.imu_t_s
+    nav.reset()
+    assert not nav.initialised
+    rng = np.random.default_rng(8)
+    started = math.nan
+    for k in range(1, 201):
+        t = t0 + k / 100.0
+        f, w = traj.imu(t)
+        nav.on_imu(ImuSample(t, t, f + rng.normal(0.0, 0.02, 3), w))
+        if k % 20 == 0:
+            meas = GnssMeasurement(
+                t_s=t - 0.05,
+                pos_ned_m=traj.pos(t - 0.05),
+                pos_var_ned_m2=np.full(3, 0.05**2),
+                vel_ned_mps=traj.vel(t - 0.05),
+                vel_var_ned_m2ps2=np.full(3, 0.05**2),
+                fix_type=FixType.RTK_FLOAT,
+            )
+            if nav.on_gnss(meas).reason == "init" and math.isnan(started):
+                started = t
+    assert started - t0 < 0.5
+    yaw_true, _ = traj.yaw(nav.imu_t_s)
+    c = quat_to_mat(nav.attitude_q_nb)
+    yaw_err = math.remainder(math.atan2(c[1, 0], c[0, 0]) - yaw_true, 2 * math.pi)
+    assert abs(yaw_err) < 3.0 * max(yaw_sigma_before, 0.5 * DEG)
+    assert math.sqrt(nav.covariance[8, 8]) <= 2.0 * yaw_sigma_before + 1e-9
