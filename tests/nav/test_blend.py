@@ -509,7 +509,6 @@ def test_consistent_on_project_simulator_approach() -> None:
             mode="strapdown",
             adaptive=False,
             pos_std_floor_m=(0.001, 0.001),
-            vel_std_floor_mps=0.001,
             gnss_white_fraction=1e-4,
         )
         nav = BlendNavigator(cfg, flight.frame)

@@ -16,17 +16,6 @@ _DEG = math.pi / 180.0
 _HOUR_S = 3600.0
 
 
-MEASUREMENT_FLOORS_BY_GRADE: dict[str, tuple[tuple[float, float], float]] = {
-    "tactical": ((0.01, 0.015), 0.02),
-    # a MEMS IMU's mechanisation error over one fix interval, in motion: on a recorded
-    # walk (consumer IMU at 150 Hz, 4 Hz RTK) the innovations are 3-5 cm RMS per 0.25 s
-    # and reach 3-4 times that in turns; against 1 cm the gate rejects healthy fixes
-    "mems": ((0.1, 0.2), 0.1),
-}
-"""Position (horizontal, vertical; m) and velocity (m/s) measurement floors per IMU grade:
-the reported accuracy below which the grade's mechanisation cannot honour a fix."""
-
-
 @dataclass(frozen=True, slots=True)
 class BlendConfig:
     """Configuration of :class:`BlendNavigator` (SI units; noise densities per sqrt(s))."""
@@ -86,10 +75,8 @@ class BlendConfig:
     gnss_err_tau_s: float | None = ranged(None, gt=0.0, optional=True)
     """Gauss-Markov model: correlation time, s (None: per fix type, GNSS_ERR_TAU_S)."""
     pos_std_floor_m: tuple[float, float] = ranged((0.01, 0.015), gt=0.0, length=2)
-    """Floor of the horizontal and vertical position measurement 1-sigma, m: what the
-    filter's model can honour between fixes (below it, gated against a mechanisation
-    error the model does not describe, healthy fixes fail). Per IMU grade in
-    :meth:`for_grade` (:data:`MEASUREMENT_FLOORS_BY_GRADE`)."""
+    """Floor of the horizontal and vertical position measurement 1-sigma, m: set it to what
+    the filter's model can honour between fixes (docs/methods.md, "Measurement floors")."""
     vel_std_floor_mps: float = ranged(0.02, gt=0.0)
     """Floor of the velocity measurement 1-sigma, m/s (as ``pos_std_floor_m``)."""
     vel_std_fallback_mps: float = ranged(0.3, gt=0.0)
@@ -137,22 +124,18 @@ class BlendConfig:
     @classmethod
     def for_grade(cls, grade: str, **overrides: object) -> BlendConfig:
         """Noise densities of an IMU grade from :data:`companion.nav.grades.IMU_GRADES`:
-        ``"tactical"`` (1-10 deg/h gyros, El-Mowafy 2005) or ``"mems"``, and the grade's
-        measurement floors (:data:`MEASUREMENT_FLOORS_BY_GRADE`).
+        ``"tactical"`` (1-10 deg/h gyros, El-Mowafy 2005) or ``"mems"``.
 
         ``overrides`` replace any other field.
         """
         if grade not in IMU_GRADES or grade == "perfect":
             raise ValueError(f"grade must be one of ['mems', 'tactical'], got {grade!r}")
         g = IMU_GRADES[grade]
-        pos_floor, vel_floor = MEASUREMENT_FLOORS_BY_GRADE[grade]
         params: dict[str, object] = dict(
             accel_vrw_mps_rts=g.acc_noise_density_mps2_rthz,
             gyro_arw_rad_rts=g.gyro_noise_density_radps_rthz,
             accel_bias_sigma_mps2=g.acc_bias_sigma_mps2,
             gyro_bias_sigma_radps=g.gyro_bias_sigma_radps,
-            pos_std_floor_m=pos_floor,
-            vel_std_floor_mps=vel_floor,
         )
         params.update(overrides)
         return cls(**params)  # type: ignore[arg-type]

@@ -272,13 +272,14 @@ class BlendNavigator:
         except ValueError:
             return self._refuse(meas, "innovation_cov_not_pd")
         innov_pos = -y_arr[:3]
+        nis = corr.nis
         s_pos = corr.innov_cov[:3, :3]
-        self.diag.last_nis = corr.nis
+        self.diag.last_nis = nis
         self.diag.last_dof = dof
-        if gate and corr.nis > threshold:
+        if gate and nis > threshold:
             self.diag.gated += 1
-            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, corr.nis, threshold)
-            return GnssUpdate(meas.t_s, False, corr.nis, dof, threshold, innov_pos, s_pos, "gate")
+            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, nis, threshold)
+            return GnssUpdate(meas.t_s, False, nis, dof, threshold, innov_pos, s_pos, "gate")
 
         d = corr.dx.tolist()
         if cfg.adaptive and self._adaptive.update(
@@ -299,7 +300,7 @@ class BlendNavigator:
         self._apply(idx, d, corr.p_post)
         self._last_fuse_t_s = meas.t_s
         self.diag.fused += 1
-        return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
+        return GnssUpdate(meas.t_s, True, nis, dof, threshold, innov_pos, s_pos)
 
     def predict(self, t_s: float) -> NavState | None:
         """The state carried from the newest IMU time to ``t_s`` (constant velocity), unchanged."""
