@@ -216,7 +216,8 @@ def write_walk_tlog(walk: Walk, path: Path) -> dict[str, Any]:
         )
         events.append((t + 0.05, 2, msg))
         n_fix += 1
-    t_hb = float(walk.imu_t[0]) - 0.5
+    # an autopilot sends its heartbeat from boot: before the first fix and IMU sample
+    t_hb = min(float(walk.imu_t[0]), float(walk.pos_t[0])) - 0.5
     while t_hb < float(walk.imu_t[-1]):
         hb = mav.MAVLink_heartbeat_message(
             mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4, 3
