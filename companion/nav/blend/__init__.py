@@ -36,9 +36,14 @@ below the receiver's report or the IMU's specification (``r_scale_bounds`` and
 fixes, and a window can reliably tell only that noise is larger than modelled.
 ``BlendConfig(adaptive=False)`` is the non-adaptive baseline.
 
+Without an autopilot attitude the blend aligns itself (:mod:`.alignment`): levelled from
+the accelerometer at rest, yaw fitted to the GNSS velocity changes once moving; it then
+runs strapdown. The receiver's reported accuracies are floored at what the model can
+honour between fixes (``pos_std_floor_m``, ``vel_std_floor_mps``).
+
 Modules: :mod:`.config` (:class:`BlendConfig`), :mod:`.filter` (:class:`BlendNavigator`),
-:mod:`.error_model`, :mod:`.history`, :mod:`.measurement`, :mod:`.receiver`,
-:mod:`.adaptive`, :mod:`.diagnostics`. Method notes: ``docs/methods.md``.
+:mod:`.alignment`, :mod:`.error_model`, :mod:`.history`, :mod:`.measurement`,
+:mod:`.receiver`, :mod:`.adaptive`, :mod:`.diagnostics`. Method notes: ``docs/methods.md``.
 
 References
 ----------

@@ -54,6 +54,18 @@ class BlendConfig:
     """Strapdown mode: initial attitude error 1-sigma about N, E, D, rad."""
     init_vel_sigma_mps: float = ranged(1.0, gt=0.0)
     """Initial velocity 1-sigma when the first fix has none, m/s."""
+    align_static_s: float = ranged(1.0, gt=0.0)
+    """Own alignment (no autopilot attitude): length of the rest window that levels, s."""
+    align_static_acc_std_mps2: float = ranged(0.2, gt=0.0)
+    """Own alignment: largest accelerometer standard deviation per axis at rest, m/s^2."""
+    align_static_gyro_std_radps: float = ranged(0.5 * _DEG, gt=0.0)
+    """Own alignment: largest gyro standard deviation per axis at rest, rad/s."""
+    align_window_s: float = ranged(10.0, gt=0.0)
+    """Own alignment: window of GNSS velocity changes that yaw is fitted to, s."""
+    align_yaw_sigma_max_rad: float = ranged(10.0 * _DEG, gt=0.0)
+    """Own alignment: the blend starts once the fitted yaw's 1-sigma is below this, rad."""
+    align_tilt_sigma_rad: float = ranged(1.0 * _DEG, gt=0.0)
+    """Own alignment: 1-sigma of roll and pitch levelled at rest (accel bias over g), rad."""
     gate_false_alarm_prob: float = ranged(1e-4, gt=0.0, lt=1.0)
     """Probability that a consistent fix fails the innovation chi-square gate."""
     gnss_error_model: str = ranged("gauss_markov", choices=("gauss_markov", "white"))
@@ -63,9 +75,10 @@ class BlendConfig:
     gnss_err_tau_s: float | None = ranged(None, gt=0.0, optional=True)
     """Gauss-Markov model: correlation time, s (None: per fix type, GNSS_ERR_TAU_S)."""
     pos_std_floor_m: tuple[float, float] = ranged((0.01, 0.015), gt=0.0, length=2)
-    """Floor of the horizontal and vertical position measurement 1-sigma, m."""
+    """Floor of the horizontal and vertical position measurement 1-sigma, m: set it to what
+    the filter's model can honour between fixes (docs/methods.md, "Measurement floors")."""
     vel_std_floor_mps: float = ranged(0.02, gt=0.0)
-    """Floor of the velocity measurement 1-sigma, m/s."""
+    """Floor of the velocity measurement 1-sigma, m/s (as ``pos_std_floor_m``)."""
     vel_std_fallback_mps: float = ranged(0.3, gt=0.0)
     """Velocity 1-sigma used when the receiver reported none, m/s."""
     r_scale_bounds: tuple[float, float] = ranged((1.0, 20.0), gt=0.0, finite=False, length=2)

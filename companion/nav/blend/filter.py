@@ -4,6 +4,7 @@ together (the method: :mod:`companion.nav.blend`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import deque
@@ -12,6 +13,7 @@ import numpy as np
 
 from companion.nav import ins
 from companion.nav.blend.adaptive import AdaptiveNoise
+from companion.nav.blend.alignment import Alignment, CoarseAligner
 from companion.nav.blend.config import BlendConfig
 from companion.nav.blend.diagnostics import BlendDiagnostics
 from companion.nav.blend.error_model import (
@@ -75,6 +77,16 @@ class BlendNavigator:
         self._gnss = GnssModel(cfg)
         self._adaptive = AdaptiveNoise(cfg, has_lever=self._gnss.has_lever, gauss_markov=self._gm)
         self._rx = ReceiverError(cfg.gnss_err_tau_s)
+        self._aligner = CoarseAligner(
+            cfg.align_static_s,
+            cfg.align_static_acc_std_mps2,
+            cfg.align_static_gyro_std_radps,
+            cfg.align_window_s,
+            cfg.align_yaw_sigma_max_rad,
+            cfg.align_tilt_sigma_rad,
+        )
+        self._own_model: ErrorModel | None = None
+        self._own_attitude = False
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -85,7 +97,16 @@ class BlendNavigator:
         return self._init
 
     def reset(self) -> None:
-        """Forget everything (the configuration and frame are kept)."""
+        """Forget everything (the configuration and frame are kept), except, when the blend
+        ran on its own alignment, its attitude and gyro bias: the aligner carries them on
+        (no autopilot attitude would level it again while moving)."""
+        seed = self._own_alignment() if getattr(self, "_init", False) else None
+        self._aligner.reset()
+        if seed is not None:
+            self._aligner.seed(seed)
+        self._strapdown = self.config.mode == "strapdown"
+        self._own_attitude = False
+        self._model = ErrorModel(self.config)
         self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
         self._init = False
         self._pre_imu: deque[tuple[float, list[float], list[float]]]
@@ -124,6 +145,8 @@ class BlendNavigator:
                 self._pre_imu.popleft()
             mech.set_raw(acc_t, gyro_t)
             mech.t_s = sample.t_s
+            if self._att_q is None:
+                self._aligner.on_imu(sample.t_s, acc_t, gyro_t)
             return
         dt = sample.t_s - mech.t_s
         if dt <= 0.0:
@@ -200,6 +223,8 @@ class BlendNavigator:
             return self._refuse(meas, "position_not_finite")
         r_pos_rep, r_vel_rep = self._gnss.reported_variances(meas)
         if not self._init:
+            vel = meas.vel_ned_mps.tolist()
+            self._aligner.on_fix(meas.t_s, vel[0], vel[1])
             return self._initialise(meas, r_pos_rep, r_vel_rep)
         mech = self._mech
         if meas.t_s > mech.t_s + cfg.cov_interval_s:
@@ -247,13 +272,14 @@ class BlendNavigator:
         except ValueError:
             return self._refuse(meas, "innovation_cov_not_pd")
         innov_pos = -y_arr[:3]
+        nis = corr.nis
         s_pos = corr.innov_cov[:3, :3]
-        self.diag.last_nis = corr.nis
+        self.diag.last_nis = nis
         self.diag.last_dof = dof
-        if gate and corr.nis > threshold:
+        if gate and nis > threshold:
             self.diag.gated += 1
-            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, corr.nis, threshold)
-            return GnssUpdate(meas.t_s, False, corr.nis, dof, threshold, innov_pos, s_pos, "gate")
+            log.debug("fix %.3f gated: NIS %.1f > %.1f", meas.t_s, nis, threshold)
+            return GnssUpdate(meas.t_s, False, nis, dof, threshold, innov_pos, s_pos, "gate")
 
         d = corr.dx.tolist()
         if cfg.adaptive and self._adaptive.update(
@@ -274,7 +300,7 @@ class BlendNavigator:
         self._apply(idx, d, corr.p_post)
         self._last_fuse_t_s = meas.t_s
         self.diag.fused += 1
-        return GnssUpdate(meas.t_s, True, corr.nis, dof, threshold, innov_pos, s_pos)
+        return GnssUpdate(meas.t_s, True, nis, dof, threshold, innov_pos, s_pos)
 
     def predict(self, t_s: float) -> NavState | None:
         """The state carried from the newest IMU time to ``t_s`` (constant velocity), unchanged."""
@@ -427,14 +453,46 @@ class BlendNavigator:
         if self._gm:
             self._rx.inject(d[IGB : IGB + 3])
 
+    def _use_own_attitude(self) -> None:
+        """Run strapdown on the blend's own alignment (no autopilot attitude to aid it)."""
+        self._own_attitude = True
+        if not self._strapdown:
+            self._strapdown = True
+            if self._own_model is None:
+                self._own_model = ErrorModel(dataclasses.replace(self.config, mode="strapdown"))
+            self._own_model.reset(self.diag.accel_psd_ned)
+            self._model = self._own_model
+
+    def _own_alignment(self) -> Alignment | None:
+        """The blend's attitude as an alignment to restart from (own-alignment runs only)."""
+        if not self._own_attitude:
+            return None
+        mech = self._mech
+        p = self._p
+        tilt = math.sqrt(max(p[6, 6], p[7, 7], 0.0))
+        bg_sig = math.sqrt(max(p[12, 12], p[13, 13], p[14, 14], 0.0))
+        yaw_sig = math.sqrt(max(p[8, 8], 0.0))
+        if yaw_sig > self.config.align_yaw_sigma_max_rad:
+            return None
+        bg = mech.bg
+        return Alignment(mech.t_s, mech.q_nb, (bg[0], bg[1], bg[2]), tilt, yaw_sig, bg_sig)
+
     def _initialise(
         self, meas: GnssMeasurement, r_pos_l: list[float], r_vel_l: list[float]
     ) -> GnssUpdate:
         """Start from the first fix and the latest attitude, at the newest IMU time."""
         cfg = self.config
         r_pos, r_vel = np.array(r_pos_l), np.array(r_vel_l)
+        if not self._pre_imu:
+            return self._refuse(meas, "no_imu_yet")
+        align: Alignment | None = None
         if self._att_q is None:
-            return self._refuse(meas, "no_attitude_yet")
+            # no autopilot attitude: the blend's own, levelled at rest, yaw from GNSS velocity
+            align = self._aligner.alignment()
+            if align is None:
+                return self._refuse(
+                    meas, "aligning" if self._aligner.levelled else "not_levelled_yet"
+                )
         pre = self._pre_imu
         if not pre:
             return self._refuse(meas, "no_imu_yet")
@@ -446,7 +504,18 @@ class BlendNavigator:
         t0 = min(meas.t_s, pre[-1][0])
         before = [x for x in pre if x[0] <= t0]
         mech.set_raw(before[-1][1], before[-1][2])
-        q0 = mech.carry_attitude(self._att_q, t0 - self._att_t_s)
+        if align is not None:
+            mech.bg = list(align.gyro_bias_b_radps)
+            if align.rest_specific_force_b_mps2 is not None:
+                # at rest |f| = g + the bias along the vertical (the observable component)
+                f_b = align.rest_specific_force_b_mps2
+                f_norm = math.sqrt(sum(c * c for c in f_b))
+                b_v = f_norm - mech.gravity.down_mps2(meas.pos_ned_m[0], meas.pos_ned_m[2])
+                mech.ba = [b_v * c / f_norm for c in f_b]
+            q0 = mech.carry_attitude(align.q_nb, t0 - align.t_s)
+            self._use_own_attitude()
+        else:
+            q0 = mech.carry_attitude(self._att_q, t0 - self._att_t_s)  # type: ignore[arg-type]
         mat_nb = quat_to_mat(q0)
         vel = np.asarray(meas.vel_ned_mps, dtype=float)
         vel_ok = np.isfinite(vel)
@@ -469,9 +538,13 @@ class BlendNavigator:
             p[IGB : IGB + 3, 0:3] = -np.diag(var)
         p[3:6, 3:6] = np.diag(var_v)
         att_sig = np.array(cfg.init_att_sigma_rad if self._strapdown else cfg.att_err_sigma_rad)
+        bg_var = cfg.gyro_bias_sigma_radps**2
+        if align is not None:
+            att_sig = np.array([align.tilt_sigma_rad, align.tilt_sigma_rad, align.yaw_sigma_rad])
+            bg_var = align.gyro_bias_sigma_radps**2
         p[6:9, 6:9] = np.diag(att_sig**2)
         p[9:12, 9:12] = np.eye(3) * cfg.accel_bias_sigma_mps2**2
-        p[12:15, 12:15] = np.eye(3) * cfg.gyro_bias_sigma_radps**2
+        p[12:15, 12:15] = np.eye(3) * bg_var
         self._p = p
         self._att_corr = (1.0, 0.0, 0.0, 0.0)
         self._hist.clear()
@@ -484,6 +557,10 @@ class BlendNavigator:
                 if mech.seg_dt_s >= cfg.cov_interval_s:
                     self._close_segment()
         pre.clear()
-        log.info("blend initialised at t=%.3f s (%s)", meas.t_s, cfg.mode)
+        log.info(
+            "blend initialised at t=%.3f s (%s)",
+            meas.t_s,
+            "own alignment" if align is not None else cfg.mode,
+        )
         gate3 = self._gates[3]
         return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")

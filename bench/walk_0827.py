@@ -1,0 +1,417 @@
+"""A real consumer GNSS + IMU walk through the service, with GNSS outages, scored against RTK.
+
+The recording (``../shared/realdata/gnss_imu/walk_0827``, from rtklibexplorer's
+GNSS_IMU, BSD-3-Clause) is a handheld receiver and IMU carried on a walk with tight
+turns: ``imu_1730.csv`` (~167 Hz; accelerations in g, rates in deg/s, a millisecond
+counter; the IMU mounted rotated by roll 180 deg, yaw -90 deg) and ``gnss_1730_sf.pos``
+(an RTKLIB solution at 4 Hz with velocities; Q = 1 RTK fixed, 2 float).
+
+:func:`write_walk_tlog` turns it into the MAVLink 2 telemetry log an ArduPilot would send
+(no ATTITUDE): HIGHRES_IMU at the IMU's rate (body FRD axes, SI), GPS_RAW_INT from the
+``.pos`` (fix type 6 / 5 for Q 1 / 2; ``h_acc``, ``v_acc``, ``vel_acc`` the solution's
+own 1-sigma), a HEARTBEAT at 1 Hz; GNSS is withheld in the source repository's outage
+schedule: 15 s outages starting 25 s after the first fix, alternating with 30 s of GNSS,
+until 45 s before the end. The log is replayed through :class:`companion.pipeline.Pipeline`
+as ``companion replay`` does, and the published GPS_INPUT scored against the RTK solution
+(the reference, interpolated at each GPS_INPUT's time):
+
+* per outage, the closure error: the last position published before the first fix after
+  the outage, horizontal and vertical, against the reference at its time; the same for
+  holding the last fix and for constant-velocity extrapolation from it;
+* fixes sent (all outside the outages, all healthy RTK) that the service did not use;
+* how often the published 95 % bound (GPS_INPUT accuracies are 1-sigma: 2.45 sigma
+  horizontally, 1.96 sigma vertically) contains the reference.
+
+The targets are a textbook real-time loosely coupled filter's closures on these outages
+(4.6 m horizontal, 1.9 m vertical on average), no healthy fix unused and >= 95 %
+coverage. ``walk_row()`` returns the figures as a dict (one row of a larger table), with
+the measurement floors a hand-carried consumer IMU can honour (:data:`HANDHELD_FLOORS`);
+the table also shows the service defaults.
+
+Run: ``python bench/walk_0827.py`` (skips with a stated reason without the data).
+"""
+
+from __future__ import annotations
+
+import argparse
+import calendar
+import dataclasses
+import math
+import sys
+import tempfile
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from companion.config import Config
+from companion.mavlink.tlog import TlogReader, TlogWriter
+from companion.pipeline import Pipeline
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA_DIR = ROOT.parent / "shared" / "realdata" / "gnss_imu" / "walk_0827"
+G0_MPS2 = 9.80665
+GPS_UTC_LEAP_S = 18.0
+"""GPS time minus UTC in 2025, s (the .pos is in GPS time; the log's record times UTC)."""
+BOOT_BEFORE_FIRST_FIX_S = 20.0
+"""The autopilot clock reads this much at the first fix of the .pos, s."""
+
+# The IMU's millisecond counter is mapped onto GPS time as the source repository's own
+# conversion does (its imu_1730_sf.csv): the first and last full samples of imu_1730.csv
+# at these GPS times (UNIX-style seconds of GPST), the counter scaled linearly between.
+IMU_FIRST_GPST_S = 1756402240.961
+IMU_LAST_GPST_S = 1756402375.232
+
+OUTAGE_START_S = 25.0
+OUTAGE_LEN_S = 15.0
+OUTAGE_PERIOD_S = 45.0
+OUTAGE_END_MARGIN_S = 45.0
+TARGET_H_M = 4.6
+TARGET_V_M = 1.9
+K95_H = 2.4477
+"""95 % of a circular 2-D Gaussian lies within 2.4477 sigma."""
+K95_V = 1.96
+HANDHELD_FLOORS = {"pos_std_floor_m": (0.1, 0.2), "vel_std_floor_mps": 0.1}
+"""The measurement floors a consumer IMU carried by hand can honour between 4 Hz fixes
+(docs/methods.md, "Measurement floors"): the walk's configuration; the service defaults
+(1 cm, 1.5 cm, 2 cm/s) are an autopilot IMU's in flight."""
+
+
+def handheld_config() -> Config:
+    """The service defaults with :data:`HANDHELD_FLOORS` (the walk's device)."""
+    base = Config()
+    return dataclasses.replace(base, blend=dataclasses.replace(base.blend, **HANDHELD_FLOORS))
+
+
+def imu_rotation() -> np.ndarray:
+    """Sensor-to-body (FRD) rotation of the walk's IMU: ZYX Euler roll 180, yaw -90 deg."""
+    r = math.radians(180.0)
+    y = math.radians(-90.0)
+    rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
+    rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
+    return rz @ rx
+
+
+@dataclass
+class Walk:
+    """The recording on the GPS time scale (s): IMU samples and the RTK solution."""
+
+    imu_t: np.ndarray  # (N,) GPST s
+    acc_b: np.ndarray  # (N, 3) m/s^2, body FRD
+    gyro_b: np.ndarray  # (N, 3) rad/s, body FRD
+    pos_t: np.ndarray  # (M,) GPST s
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    h_m: np.ndarray
+    q: np.ndarray  # RTKLIB quality (1 fixed, 2 float, ...)
+    ns: np.ndarray
+    sd_neu: np.ndarray  # (M, 3) m
+    vel_neu: np.ndarray  # (M, 3) m/s (north, east, up)
+    sdv_neu: np.ndarray  # (M, 3) m/s
+
+
+def load_walk(data_dir: Path = DATA_DIR) -> Walk:
+    """Read ``imu_1730.csv`` and ``gnss_1730_sf.pos``."""
+    lines = (data_dir / "imu_1730.csv").read_text().splitlines()
+    # the first and last lines are cut off in the recording (the source skips them too)
+    rows = [[float(v) for v in ln.split(",")] for ln in lines[1:-1] if ln.count(",") == 6]
+    arr = np.array(rows)
+    ms = arr[:, 6]
+    t = IMU_FIRST_GPST_S + (ms - ms[0]) / (ms[-1] - ms[0]) * (IMU_LAST_GPST_S - IMU_FIRST_GPST_S)
+    rot = imu_rotation()
+    acc_b = (arr[:, 0:3] * G0_MPS2) @ rot.T
+    gyro_b = np.radians(arr[:, 3:6]) @ rot.T
+    cols: list[list[float]] = []
+    times: list[float] = []
+    for ln in (data_dir / "gnss_1730_sf.pos").read_text().splitlines():
+        if not ln.strip() or ln.startswith("%"):
+            continue
+        parts = ln.split()
+        y, mo, d = (int(v) for v in parts[0].split("/"))
+        hh, mi, ss = parts[1].split(":")
+        sec = calendar.timegm((y, mo, d, int(hh), int(mi), 0)) + float(ss)
+        times.append(sec)
+        cols.append([float(v) for v in parts[2:]])
+    p = np.array(cols)
+    return Walk(
+        imu_t=t,
+        acc_b=acc_b,
+        gyro_b=gyro_b,
+        pos_t=np.array(times),
+        lat_deg=p[:, 0],
+        lon_deg=p[:, 1],
+        h_m=p[:, 2],
+        q=p[:, 3].astype(int),
+        ns=p[:, 4].astype(int),
+        sd_neu=p[:, 5:8],
+        vel_neu=p[:, 13:16],
+        sdv_neu=p[:, 16:19],
+    )
+
+
+def outages(walk: Walk) -> list[tuple[float, float]]:
+    """The outage windows [start, end) in GPST s (the source repository's schedule)."""
+    t0, t1 = float(walk.pos_t[0]), float(walk.pos_t[-1])
+    out = []
+    s = t0 + OUTAGE_START_S
+    while s < t1 - OUTAGE_END_MARGIN_S:
+        out.append((s, s + OUTAGE_LEN_S))
+        s += OUTAGE_PERIOD_S
+    return out
+
+
+def in_outage(t: float, windows: list[tuple[float, float]]) -> bool:
+    return any(a <= t < b for a, b in windows)
+
+
+def write_walk_tlog(walk: Walk, path: Path) -> dict[str, Any]:
+    """Write the walk as a MAVLink 2 tlog (system 1, component 1); returns what was written."""
+    windows = outages(walk)
+    boot0 = float(walk.pos_t[0]) - BOOT_BEFORE_FIRST_FIX_S  # GPST at boot
+
+    def rec_t(gpst: float) -> float:  # UNIX-epoch record time
+        return gpst - GPS_UTC_LEAP_S
+
+    events: list[tuple[float, int, Any]] = []
+    acc32 = walk.acc_b.astype(np.float32).tolist()
+    gyr32 = walk.gyro_b.astype(np.float32).tolist()
+    for i, t in enumerate(walk.imu_t.tolist()):
+        us = round((t - boot0) * 1e6)
+        msg = mav.MAVLink_highres_imu_message(
+            us, *acc32[i], *gyr32[i], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 25.0, 0b111111, 0
+        )
+        events.append((t + 0.001, 1, msg))
+    n_fix = 0
+    for k, t in enumerate(walk.pos_t.tolist()):
+        if in_outage(t, windows):
+            continue
+        vn, ve, vu = walk.vel_neu[k]
+        speed = math.hypot(vn, ve)
+        cog = math.degrees(math.atan2(ve, vn)) % 360.0
+        sdn, sde, sdu = walk.sd_neu[k]
+        sdv = max(walk.sdv_neu[k][0], walk.sdv_neu[k][1])
+        fix_type = 6 if walk.q[k] == 1 else 5 if walk.q[k] == 2 else 3
+        msg = mav.MAVLink_gps_raw_int_message(
+            round((t - boot0) * 1e6),
+            fix_type,
+            round(walk.lat_deg[k] * 1e7),
+            round(walk.lon_deg[k] * 1e7),
+            round(walk.h_m[k] * 1000),
+            65535,
+            65535,
+            round(speed * 100),
+            round(cog * 100) % 36000,
+            int(walk.ns[k]),
+            round(walk.h_m[k] * 1000),
+            max(1, round(max(sdn, sde) * 1000)),
+            max(1, round(sdu * 1000)),
+            max(1, round(sdv * 1000)),
+            0,
+            0,
+        )
+        events.append((t + 0.05, 2, msg))
+        n_fix += 1
+    # an autopilot sends its heartbeat from boot: before the first fix and IMU sample
+    t_hb = min(float(walk.imu_t[0]), float(walk.pos_t[0])) - 0.5
+    while t_hb < float(walk.imu_t[-1]):
+        hb = mav.MAVLink_heartbeat_message(
+            mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4, 3
+        )
+        events.append((t_hb, 0, hb))
+        t_hb += 1.0
+    events.sort(key=lambda e: (e[0], e[1]))
+    link = mav.MAVLink(None, srcSystem=1, srcComponent=1)
+    with TlogWriter(path, mav=link) as writer:
+        for t, _, msg in events:
+            writer.write(rec_t(t), msg)
+    return {"fixes": n_fix, "windows": windows, "boot0_gpst": boot0}
+
+
+def _llh_to_ne(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: float):
+    """Local north/east (m) of geodetic points about (lat0, lon0) deg (WGS-84 radii)."""
+    a, e2 = 6378137.0, 6.69437999014e-3
+    phi = math.radians(lat0)
+    s = math.sin(phi) ** 2
+    rn = a * (1 - e2) / (1 - e2 * s) ** 1.5
+    re = a / math.sqrt(1 - e2 * s)
+    n = np.radians(np.asarray(lat_deg) - lat0) * rn
+    e = np.radians(np.asarray(lon_deg) - lon0) * re * math.cos(phi)
+    return n, e
+
+
+def replay_walk(tlog: Path, out: Path, config: Config | None = None) -> tuple[Pipeline, list]:
+    """Feed the walk through a Pipeline (as ``companion replay`` does); the GPS_INPUTs
+    published, as (record time, message)."""
+    pipeline = Pipeline(config)
+    due_s = pipeline.next_due_s()
+    published: list[tuple[float, Any]] = []
+    with TlogWriter(out) as writer:
+        for t_rx_s, msg in TlogReader(tlog):
+            if t_rx_s >= due_s:
+                frames = pipeline.on_timer(t_rx_s)
+                if frames:
+                    writer.write_frames(t_rx_s, frames)
+                due_s = pipeline.next_due_s()
+            frames = pipeline.on_message(msg, t_rx_s)
+            if frames:
+                writer.write_frames(t_rx_s, frames)
+    for t_rx_s, msg in TlogReader(out):
+        if msg.get_type() == "GPS_INPUT":
+            published.append((t_rx_s, msg))
+    return pipeline, published
+
+
+def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline) -> dict[str, Any]:
+    """The figures of one replay (see the module docstring)."""
+    boot0 = info["boot0_gpst"]
+    lat0, lon0 = float(walk.lat_deg[0]), float(walk.lon_deg[0])
+    ref_n, ref_e = _llh_to_ne(walk.lat_deg, walk.lon_deg, lat0, lon0)
+    ref_t = walk.pos_t
+
+    def ref_at(t: float) -> tuple[float, float, float]:
+        return (
+            float(np.interp(t, ref_t, ref_n)),
+            float(np.interp(t, ref_t, ref_e)),
+            float(np.interp(t, ref_t, walk.h_m)),
+        )
+
+    pub_t = np.array([m.time_usec / 1e6 + boot0 for _, m in published])
+    pub_n, pub_e = _llh_to_ne(
+        np.array([m.lat / 1e7 for _, m in published]),
+        np.array([m.lon / 1e7 for _, m in published]),
+        lat0,
+        lon0,
+    )
+    pub_h = np.array([m.alt for _, m in published])
+    h_acc = np.array([m.horiz_accuracy for _, m in published])
+    v_acc = np.array([m.vert_accuracy for _, m in published])
+    fix_ok = np.array([m.fix_type >= 3 for _, m in published])
+    rn = np.interp(pub_t, ref_t, ref_n)
+    re_ = np.interp(pub_t, ref_t, ref_e)
+    rh = np.interp(pub_t, ref_t, walk.h_m)
+    err_h = np.hypot(pub_n - rn, pub_e - re_)
+    err_v = np.abs(pub_h - rh)
+    inside = (pub_t >= ref_t[0]) & (pub_t <= ref_t[-1]) & fix_ok
+    cov_h = float(np.mean(err_h[inside] <= K95_H * h_acc[inside])) if inside.any() else math.nan
+    cov_v = float(np.mean(err_v[inside] <= K95_V * v_acc[inside])) if inside.any() else math.nan
+
+    closures = []
+    for a, b in info["windows"]:
+        before = np.nonzero(ref_t < a)[0]
+        after = np.nonzero(ref_t >= b)[0]
+        if not len(before) or not len(after):
+            continue
+        kl, kf = int(before[-1]), int(after[0])
+        t_close = float(ref_t[kf])
+        sel = np.nonzero(pub_t <= t_close + 1e-6)[0]
+        # the last published before the fix that closes the outage was processed
+        sel = sel[pub_t[sel] < t_close + 0.05] if len(sel) else sel
+        if not len(sel):
+            continue
+        j = int(sel[-1])
+        n_r, e_r, h_r = ref_at(float(pub_t[j]))
+        pub_err = (math.hypot(pub_n[j] - n_r, pub_e[j] - e_r), abs(pub_h[j] - h_r))
+        n_c, e_c, h_c = ref_at(t_close)
+        hold_err = (math.hypot(ref_n[kl] - n_c, ref_e[kl] - e_c), abs(walk.h_m[kl] - h_c))
+        dt = t_close - float(ref_t[kl])
+        vn, ve, vu = walk.vel_neu[kl]
+        cv_err = (
+            math.hypot(ref_n[kl] + vn * dt - n_c, ref_e[kl] + ve * dt - e_c),
+            abs(walk.h_m[kl] + vu * dt - h_c),
+        )
+        closures.append((pub_err, hold_err, cv_err, t_close - float(walk.pos_t[0])))
+    gnss = Counter(pipeline.engine.stats.gnss)
+    used = gnss.get("fused", 0) + gnss.get("reinitialised", 0)
+    unused = {k: v for k, v in gnss.items() if k not in ("fused", "reinitialised") and v}
+
+    def mean(idx: int, axis: int) -> float:
+        return float(np.mean([c[idx][axis] for c in closures])) if closures else math.nan
+
+    return {
+        "log": "walk_0827",
+        "outages": len(closures),
+        "close_h_m": mean(0, 0),
+        "close_v_m": mean(0, 1),
+        "hold_h_m": mean(1, 0),
+        "hold_v_m": mean(1, 1),
+        "cv_h_m": mean(2, 0),
+        "cv_v_m": mean(2, 1),
+        "per_outage": [(c[3], c[0], c[1], c[2]) for c in closures],
+        "fixes_sent": info["fixes"],
+        "fixes_used": used,
+        "fixes_unused": info["fixes"] - used,
+        "unused_reasons": unused,
+        "cov95_h": cov_h,
+        "cov95_v": cov_v,
+        "published": int(inside.sum()),
+        "max_err_h_m": float(err_h[inside].max()) if inside.any() else math.nan,
+        "median_err_h_m": float(np.median(err_h[inside])) if inside.any() else math.nan,
+    }
+
+
+def walk_row(config: Config | None = None, data_dir: Path = DATA_DIR) -> dict[str, Any] | None:
+    """The walk's figures (a dict), or None without the data. ``config`` defaults to
+    :func:`handheld_config` (the device's floors); ``Config()`` gives the service defaults."""
+    if not (data_dir / "imu_1730.csv").exists():
+        return None
+    if config is None:
+        config = handheld_config()
+    walk = load_walk(data_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        tlog = Path(tmp) / "walk_0827.tlog"
+        info = write_walk_tlog(walk, tlog)
+        pipeline, published = replay_walk(tlog, Path(tmp) / "walk_0827.out.tlog", config)
+    return score(walk, info, published, pipeline)
+
+
+def print_row(row: dict[str, Any], title: str) -> None:
+    print(f"walk_0827, {title}: {row['outages']} outages of {OUTAGE_LEN_S:.0f} s, RTK reference")
+    print(f"{'':24s}{'horizontal m':>14s}{'vertical m':>12s}")
+    print(f"{'closure (published)':24s}{row['close_h_m']:14.2f}{row['close_v_m']:12.2f}")
+    print(f"{'  target':24s}{TARGET_H_M:14.2f}{TARGET_V_M:12.2f}")
+    print(f"{'hold last fix':24s}{row['hold_h_m']:14.2f}{row['hold_v_m']:12.2f}")
+    print(f"{'constant velocity':24s}{row['cv_h_m']:14.2f}{row['cv_v_m']:12.2f}")
+    for t, pub, hold, cv in row["per_outage"]:
+        print(
+            f"  closes at {t:6.1f} s: published {pub[0]:.2f} / {pub[1]:.2f}, "
+            f"hold {hold[0]:.2f} / {hold[1]:.2f}, cv {cv[0]:.2f} / {cv[1]:.2f}"
+        )
+    print(
+        f"healthy fixes unused: {row['fixes_unused']} of {row['fixes_sent']} "
+        f"({', '.join(f'{k} {v}' for k, v in sorted(row['unused_reasons'].items())) or 'none'})"
+    )
+    print(
+        f"95 % bound covers the reference: horizontal {100 * row['cov95_h']:.1f} %, "
+        f"vertical {100 * row['cov95_v']:.1f} % of {row['published']} GPS_INPUT"
+    )
+    print(f"error: median {row['median_err_h_m']:.2f} m, max {row['max_err_h_m']:.2f} m horizontal")
+    ok = (
+        row["close_h_m"] <= TARGET_H_M
+        and row["close_v_m"] <= TARGET_V_M
+        and row["fixes_unused"] == 0
+        and min(row["cov95_h"], row["cov95_v"]) >= 0.95
+    )
+    print("targets met" if ok else "targets NOT met")
+
+
+def main() -> int:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
+    row = walk_row()
+    if row is None:
+        print(f"skipped: no recording at {DATA_DIR} (the real data is not in this checkout)")
+        return 0
+    print_row(row, "handheld floors (0.1 m, 0.2 m, 0.1 m/s)")
+    print()
+    default_row = walk_row(Config())
+    if default_row is not None:
+        print_row(default_row, "service defaults")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

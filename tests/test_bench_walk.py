@@ -1,0 +1,48 @@
+"""bench/walk_0827.py's conversion of the real walk recording: the IMU's mounting rotation,
+units and clock, the RTK solution's columns, and the outage schedule. Skips without the
+recording (it lives beside the project, in ../shared/realdata)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _bench():  # type: ignore[no-untyped-def]
+    spec = importlib.util.spec_from_file_location("bench_walk", ROOT / "bench" / "walk_0827.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["bench_walk"] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_conversion_of_the_walk() -> None:
+    bench = _bench()
+    if not (bench.DATA_DIR / "imu_1730.csv").exists():
+        pytest.skip("the walk_0827 recording is not beside this checkout (../shared/realdata)")
+    walk = bench.load_walk()
+    # the first 13 s are static: body FRD specific force is -g along down, rates near 0
+    rest = walk.imu_t < walk.imu_t[0] + 5.0
+    f = walk.acc_b[rest].mean(axis=0)
+    assert abs(f[2] + 9.9) < 0.2 and np.hypot(f[0], f[1]) < 0.3
+    assert np.all(np.abs(walk.gyro_b[rest].mean(axis=0)) < np.radians(0.5))
+    # the IMU clock spans the recording at ~150 Hz
+    rate = (len(walk.imu_t) - 1) / (walk.imu_t[-1] - walk.imu_t[0])
+    assert 140.0 < rate < 160.0
+    # RTK solution: Q 1 / 2 only, 1 cm sigmas while fixed, walking speeds
+    assert set(np.unique(walk.q)) <= {1, 2}
+    assert np.all(walk.sd_neu[walk.q == 1] < 0.05)
+    speed = np.hypot(walk.vel_neu[:, 0], walk.vel_neu[:, 1])
+    assert speed.max() < 3.0 and 1.0 < np.median(speed[speed > 0.5]) < 2.0
+    # the source's schedule: 15 s outages from 25 s after the first fix, every 45 s,
+    # ending before 45 s from the end (a 134 s recording: two)
+    t0 = walk.pos_t[0]
+    windows = [(a - t0, b - t0) for a, b in bench.outages(walk)]
+    assert np.allclose(windows, [(25.0, 40.0), (70.0, 85.0)], atol=1e-6)
