@@ -16,6 +16,7 @@ row to edit, Enter in the field to set), ``a`` acknowledge the alerts, ``q`` qui
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 from rich.text import Text
@@ -29,9 +30,12 @@ from textual.widgets import DataTable, Footer, Header, Input, Static
 from companion.console.model import ConsoleModel, NavMode
 from companion.console.send import Sender
 from companion.mavlink.framing import FrameParser
-from companion.mavlink.link import Link, LinkError, open_link
+from companion.mavlink.link import Link, LinkError, UdpLink, open_link
 
 REFRESH_S = 0.5
+PARAM_QUIET_S = 0.5
+"""No PARAM_VALUE for this long while some are missing: the list is over, ask for the rest."""
+PARAM_READS_AT_ONCE = 20
 SEVERITY_STYLES = {
     "EMERG": "bold white on red",
     "ALERT": "bold white on red",
@@ -94,6 +98,20 @@ class ParamScreen(Screen[None]):
             table.add_column(name, key=name)
         self.refresh_table()
         self.set_interval(REFRESH_S, self.refresh_table)
+        self.set_interval(REFRESH_S, self.fetch_missing)
+
+    def fetch_missing(self) -> None:
+        """Ask again, by index, for what the list lost (as ground stations do), a few a time."""
+        model: ConsoleModel = self.app.model  # type: ignore[attr-defined]
+        if model.param_count is None or len(model.params) >= model.param_count:
+            return
+        newest = max((e.t_rx_s for e in model.params.values()), default=0.0)
+        if self.app.clock() - newest < PARAM_QUIET_S:  # type: ignore[attr-defined]
+            return  # the list is still coming
+        have = {e.index for e in model.params.values()}
+        missing = [i for i in range(model.param_count) if i not in have][:PARAM_READS_AT_ONCE]
+        for index in missing:
+            self.app.request_param(index)  # type: ignore[attr-defined]
 
     def action_reload(self) -> None:
         self.app.request_params()  # type: ignore[attr-defined]
@@ -143,12 +161,12 @@ class ConsoleApp(App[int]):
     TITLE = "companion console"
     CSS = """
     #top { height: 11; }
-    #top Panel { width: 1fr; border: round $accent; padding: 0 1; }
+    #top Panel { width: 1fr; height: 100%; border: round $accent; padding: 0 1; }
     #top Panel.stale { border: heavy red; }
     #plots { height: 1fr; min-height: 10; }
     #plots > * { width: 1fr; border: round $accent; }
     #bottom { height: 12; }
-    #alerts { width: 2fr; border: round $accent; }
+    #alerts { width: 2fr; height: 100%; border: round $accent; }
     #side { width: 1fr; }
     #side Panel { border: round $accent; padding: 0 1; height: 1fr; }
     """
@@ -161,9 +179,15 @@ class ConsoleApp(App[int]):
         Binding("q", "quit", "quit"),
     ]
 
-    def __init__(self, url: str, model: ConsoleModel | None = None) -> None:
+    def __init__(
+        self,
+        url: str,
+        model: ConsoleModel | None = None,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         super().__init__()
         self.url = url
+        self.clock = clock
         self.model = model or ConsoleModel()
         self.link: Link | None = None
         self.sender = Sender()
@@ -198,6 +222,8 @@ class ConsoleApp(App[int]):
         table.add_columns("autopilot time", "sev", "alert", "ack")
         try:
             self.link = await open_link(self.url)
+            if isinstance(self.link, UdpLink):
+                self.link.reply_to_any_sender = False
         except LinkError as exc:
             self.status = f"cannot open {self.url}: {exc}"
         else:
@@ -217,9 +243,12 @@ class ConsoleApp(App[int]):
             except LinkError as exc:
                 self.status = f"link closed: {exc}"
                 return
-            now = time.time()
+            now = self.clock()
+            heard_service = False
             for msg in self.parser.feed(data):
-                self.model.take(msg, now)
+                heard_service |= self.model.take(msg, now)
+            if heard_service and isinstance(self.link, UdpLink):
+                self.link.adopt_sender()  # commands go where the service is heard
 
     # ---------------------------------------------------------------- actions
     async def _send(self, frame: bytes) -> bool:
@@ -250,6 +279,11 @@ class ConsoleApp(App[int]):
         if target is not None:
             self.run_worker(self._send(self.sender.param_request_list(target)), group="tx")
 
+    def request_param(self, index: int) -> None:
+        target = self.model.service_system
+        if target is not None:
+            self.run_worker(self._send(self.sender.param_request_read(target, index)), group="tx")
+
     def set_param(self, name: str, value: float) -> None:
         target = self.model.service_system
         if target is None:
@@ -265,7 +299,7 @@ class ConsoleApp(App[int]):
 
     # ---------------------------------------------------------------- drawing
     def refresh_panels(self, force_alerts: bool = False) -> None:
-        now = time.time()
+        now = self.clock()
         m = self.model
         s = m.snapshot(now)
         link, nav, integ, hdg = s["link"], s["navigation"], s["integrity"], s["heading"]
@@ -302,7 +336,10 @@ class ConsoleApp(App[int]):
         over = hpl is not None and vpl is not None and (hpl > cat1["hal_m"] or vpl > cat1["val_m"])
         t.append(f"HPL {_num(hpl, '.1f')} m  VPL {_num(vpl, '.1f')} m\n", style="bold")
         t.append("category ")
-        t.append(f" {integ['category_name']} ", style="bold red" if over else "bold green")
+        cat_style = "dim" if integ["category"] is None else "bold green"
+        if integ["category"] is not None and (over or integ["category"] < 1):
+            cat_style = "bold red"
+        t.append(f" {integ['category_name']} ", style=cat_style)
         t.append("\nlimits (HAL/VAL m):")
         for name, lim in integ["limits"].items():
             ok = hpl is not None and vpl is not None and hpl <= lim["hal_m"] and vpl <= lim["val_m"]

@@ -43,14 +43,14 @@ from companion.nav.heading import HeadingStatus
 from companion.nav.rotations import euler_to_mat_nb
 from companion.types import NamedValue, Severity
 
-STALE_S = 3.0
-"""A link silent this long is STALE: its values are no longer current."""
+STALE_S = 2.5
+"""A link silent this long is STALE: its values are no longer current (drawn every 0.5 s,
+so STALE shows within 3 s of the last message)."""
 HISTORY_S = 300.0
 """Seconds of accuracy / protection-level history kept for the plots."""
 ALERTS_KEPT = 1000
 TRACK_KEPT = 3000
 AUTOPILOT_COMPONENT = 1
-MAV_STATE_STANDBY = 3
 MAV_STATE_CRITICAL = 5
 GRAVITY_MG = 9.80665 / 1000.0
 """SCALED_IMU's accelerations are in mG."""
@@ -297,7 +297,7 @@ class ConsoleModel:
 
     def mode(self, now_s: float) -> NavMode:
         """normal / degraded / bridging / lost, as published (WAITING before the first fix)."""
-        if self.lat_deg is None or self.system_status == MAV_STATE_STANDBY:
+        if self.lat_deg is None:
             return NavMode.WAITING
         if self.system_status == MAV_STATE_CRITICAL:
             return NavMode.LOST

@@ -35,6 +35,13 @@ class Sender:
         msg = self.mav.param_request_list_encode(target_system, MAV_COMP_ID_ONBOARD_COMPUTER)
         return bytes(msg.pack(self.mav))
 
+    def param_request_read(self, target_system: int, index: int) -> bytes:
+        """PARAM_REQUEST_READ by index (a value lost from the list is asked for again)."""
+        msg = self.mav.param_request_read_encode(
+            target_system, MAV_COMP_ID_ONBOARD_COMPUTER, b"", index
+        )
+        return bytes(msg.pack(self.mav))
+
     def param_set(
         self, target_system: int, name: str, value: float, param_type: int | None = None
     ) -> bytes:
