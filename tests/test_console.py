@@ -62,7 +62,7 @@ def test_console_ignores_other_components_but_times_the_autopilot():
 
 
 def test_console_tracks_from_a_station(tmp_path):
-    """With a station, the positions and the autopilot's attitude/IMU feed the S2 channel."""
+    """With a station, the positions and the autopilot's attitude/IMU feed the dynamic channel."""
     from companion.console.main import parse_station
 
     src = ROOT / "sitl_fixtures" / "cruise_gnss_loss.tlog"
@@ -78,8 +78,9 @@ def test_console_tracks_from_a_station(tmp_path):
         state.take(msg, t)
     assert state.tracker.positions > 100 and state.tracker.accelerations > 100
     snap = state.snapshot(t)
-    pos = station.lla_to_ned(math.radians(state.lat_deg), math.radians(state.lon_deg),
-                             state.alt_msl_m)
+    pos = station.lla_to_ned(
+        math.radians(state.lat_deg), math.radians(state.lon_deg), state.alt_msl_m
+    )
     true_range = float((pos**2).sum() ** 0.5)
     assert abs(snap["track"]["range_m"] - true_range) < 20.0
     assert 0.0 <= snap["track"]["az_deg"] < 360.0 and snap["track"]["pointing_sigma_deg"] < 1.0

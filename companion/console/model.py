@@ -166,7 +166,7 @@ class ConsoleModel:
         if self.station is not None and self.tracker is None:
             from companion.nav.tracking import Tracker
 
-            self.tracker = Tracker("s2")
+            self.tracker = Tracker("dynamic")
 
     # ------------------------------------------------------------------ input
     def take(self, msg: Any, t_rx_s: float) -> bool:

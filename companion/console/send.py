@@ -26,8 +26,17 @@ class Sender:
     def heading_command(self, target_system: int, action: float) -> bytes:
         """COMMAND_LONG MAV_CMD_USER_1 with ``param1`` = action (1 confirm, 0 refuse, 2 undo)."""
         msg = self.mav.command_long_encode(
-            target_system, MAV_COMP_ID_ONBOARD_COMPUTER, MAV_CMD_USER_1, 0,
-            action, 0, 0, 0, 0, 0, 0,
+            target_system,
+            MAV_COMP_ID_ONBOARD_COMPUTER,
+            MAV_CMD_USER_1,
+            0,
+            action,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
         )
         return bytes(msg.pack(self.mav))
 

@@ -44,8 +44,8 @@ from filterpy.kalman import predict as kf_predict
 from companion.nav.rotations import wrap_pi
 from companion.types import FloatArray
 
-Model = Literal["s2", "singer", "cv"]
-MODELS: tuple[Model, ...] = ("s2", "singer", "cv")
+Model = Literal["dynamic", "singer", "cv"]
+MODELS: tuple[Model, ...] = ("dynamic", "singer", "cv")
 CHANNELS = ("az", "el", "range")
 MIN_RANGE_M = 10.0
 """Below this the angles are meaningless; the angular noises are scaled with it as a floor."""
@@ -57,10 +57,10 @@ class TrackerConfig:
 
     pos_sigma_m: float = 2.0
     """Reported position's error across and along the line of sight, m."""
-    s2_jerk_psd: float = 1.0
-    """S2: power spectral density of the acceleration's change, m²/s⁵."""
-    s2_acc_sigma_mps2: float = 0.3
-    """S2: error of the acceleration from attitude and specific force, m/s²."""
+    dyn_jerk_psd: float = 1.0
+    """Dynamic channel: power spectral density of the acceleration's change, m²/s⁵."""
+    dyn_acc_sigma_mps2: float = 0.3
+    """Dynamic channel: error of the acceleration from attitude and specific force, m/s²."""
     singer_tau_s: float = 10.0
     """Singer: manoeuvre time constant 1/α, s."""
     singer_sigma_mps2: float = 3.0
@@ -106,9 +106,7 @@ def ned_to_spherical(pos_ned_m: FloatArray) -> tuple[float, float, float]:
 def los_to_ned(az_rad: float, el_rad: float, range_m: float) -> FloatArray:
     """(azimuth, elevation, range) to a station-relative NED position, m."""
     ce = math.cos(el_rad)
-    return range_m * np.array(
-        [ce * math.cos(az_rad), ce * math.sin(az_rad), -math.sin(el_rad)]
-    )
+    return range_m * np.array([ce * math.cos(az_rad), ce * math.sin(az_rad), -math.sin(el_rad)])
 
 
 def spherical_rates(
@@ -138,9 +136,7 @@ def spherical_rates(
     return np.array([az_d, el_d, dist_d]), np.array([az_dd, el_dd, dist_dd])
 
 
-def los_velocity_ned(
-    az_rad: float, el_rad: float, range_m: float, rates: FloatArray
-) -> FloatArray:
+def los_velocity_ned(az_rad: float, el_rad: float, range_m: float, rates: FloatArray) -> FloatArray:
     """Cartesian velocity from (β, ε, D) and their rates: Ḋ e_r + D ε̇ e_ε + D β̇ cos ε e_β."""
     sb, cb = math.sin(az_rad), math.cos(az_rad)
     se, ce = math.sin(el_rad), math.cos(el_rad)
@@ -202,9 +198,9 @@ class _Channel:
         if self.model == "cv":
             f = np.array([[1.0, dt], [0.0, 1.0]])
             return f, Q_continuous_white_noise(2, dt, cfg.cv_acc_psd * s2)
-        if self.model == "s2":
+        if self.model == "dynamic":
             f = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-            return f, Q_continuous_white_noise(3, dt, cfg.s2_jerk_psd * s2)
+            return f, Q_continuous_white_noise(3, dt, cfg.dyn_jerk_psd * s2)
         f, q = _singer_unit(round(dt, 6), cfg.singer_tau_s)
         return f, q * (cfg.singer_sigma_mps2**2 * s2)
 
@@ -240,13 +236,13 @@ class Tracker:
     """Azimuth, elevation and range of the aircraft from a station, by one model.
 
     Feed :meth:`position` with each reported position (station NED, m) and, for
-    the S2 model, :meth:`acceleration` with each acceleration from the
+    the ``dynamic`` model, :meth:`acceleration` with each acceleration from the
     aircraft's attitude and specific force (:func:`acceleration_ned`); the
     baselines ignore the latter. :meth:`estimate` predicts to any time.
     Samples older than the filter's time are counted in ``rejected`` and dropped.
     """
 
-    def __init__(self, model: Model = "s2", config: TrackerConfig | None = None) -> None:
+    def __init__(self, model: Model = "dynamic", config: TrackerConfig | None = None) -> None:
         if model not in MODELS:
             raise ValueError(f"unknown tracking model {model!r} (known: {', '.join(MODELS)})")
         self.model: Model = model
@@ -303,8 +299,8 @@ class Tracker:
         return True
 
     def acceleration(self, t_s: float, acc_ned_mps2: FloatArray) -> bool:
-        """S2's second observation: the aircraft's acceleration (station NED, m/s²)."""
-        if self.model != "s2":
+        """The dynamic channel's second observation: the aircraft's acceleration (station NED, m/s²)."""
+        if self.model != "dynamic":
             return False
         if not np.all(np.isfinite(acc_ned_mps2)) or not self._advance(t_s):
             if self.t_s is not None and not np.all(np.isfinite(acc_ned_mps2)):
@@ -315,7 +311,7 @@ class Tracker:
         rates = np.array([float(ch.kf.x[1, 0]) for ch in self._ch])
         vel = los_velocity_ned(az, el, dist, rates)
         _, second = spherical_rates(los_to_ned(az, el, dist), vel, np.asarray(acc_ned_mps2))
-        sig = self.cfg.s2_acc_sigma_mps2
+        sig = self.cfg.dyn_acc_sigma_mps2
         for ch, v in zip(self._ch, second, strict=True):
             ch.update(float(v), sig / dist if ch.angular else sig, 2)
         self.accelerations += 1
