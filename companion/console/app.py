@@ -15,6 +15,7 @@ row to edit, Enter in the field to set), ``a`` acknowledge the alerts, ``q`` qui
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from typing import Any
@@ -33,6 +34,8 @@ from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, UdpLink, open_link
 
 REFRESH_S = 0.5
+EARTH_RADIUS_M = 6_371_000.0
+"""For the track plot's metres (a picture, not navigation)."""
 PARAM_QUIET_S = 0.5
 """No PARAM_VALUE for this long while some are missing: the list is over, ask for the rest."""
 PARAM_READS_AT_ONCE = 20
@@ -164,7 +167,7 @@ class ConsoleApp(App[int]):
     #top Panel { width: 1fr; height: 100%; border: round $accent; padding: 0 1; }
     #top Panel.stale { border: heavy red; }
     #plots { height: 1fr; min-height: 10; }
-    #plots > * { width: 1fr; border: round $accent; }
+    #plots > .plotbox { width: 1fr; border: round $accent; }
     #bottom { height: 12; }
     #alerts { width: 2fr; height: 100%; border: round $accent; }
     #side { width: 1fr; }
@@ -192,7 +195,7 @@ class ConsoleApp(App[int]):
         self.link: Link | None = None
         self.sender = Sender()
         self.parser = FrameParser()
-        self.status = "waiting for the service"
+        self.status = "no command sent yet"
         self._alerts_shown = 0
 
     # ----------------------------------------------------------------- layout
@@ -206,8 +209,10 @@ class ConsoleApp(App[int]):
             yield Panel("tracking", id="track")
         with Horizontal(id="plots"):
             if PlotextPlot is not None:
-                yield PlotextPlot(id="acc-plot")
-                yield PlotextPlot(id="track-plot")
+                with Vertical(classes="plotbox"):
+                    yield PlotextPlot(id="acc-plot")
+                with Vertical(classes="plotbox"):
+                    yield PlotextPlot(id="track-plot")
             else:  # pragma: no cover
                 yield Static("install the console extra for plots", id="acc-plot")
         with Horizontal(id="bottom"):
@@ -342,7 +347,13 @@ class ConsoleApp(App[int]):
         t.append(f" {integ['category_name']} ", style=cat_style)
         t.append("\nlimits (HAL/VAL m):")
         for name, lim in integ["limits"].items():
-            ok = hpl is not None and vpl is not None and hpl <= lim["hal_m"] and vpl <= lim["val_m"]
+            ok = (
+                hpl is not None
+                and vpl is not None
+                and not integ["lost"]
+                and hpl <= lim["hal_m"]
+                and vpl <= lim["val_m"]
+            )
             t.append(
                 f"\n {name.replace('_', ' '):<7} {lim['hal_m']:4.0f}/{lim['val_m']:4.1f} ",
             )
@@ -379,7 +390,7 @@ class ConsoleApp(App[int]):
             t.append(f"az    {trk['az_deg']:7.2f}°  {trk['az_rate_dps']:+.2f}°/s\n")
             t.append(f"el    {trk['el_deg']:7.2f}°  {trk['el_rate_dps']:+.2f}°/s\n")
             t.append(f"range {trk['range_m']:7.0f} m {trk['range_rate_mps']:+.1f} m/s\n")
-            t.append(f"± {trk['pointing_sigma_deg']:.2f}° · {trk['range_sigma_m']:.0f} m (1σ)")
+            t.append(f"± {trk['pointing_sigma_deg']:.2f}° · {trk['range_sigma_m']:.1f} m (1σ)")
             if trk["predicted_s"] > 2.0:
                 t.append(f"\npredicted {trk['predicted_s']:.0f} s", style="bold yellow")
         self.query_one("#track", Panel).update(t)
@@ -430,31 +441,46 @@ class ConsoleApp(App[int]):
         plt.clear_data()
         plt.clear_figure()
         t_now = m.boot_time(now)
-        plt.title("accuracy 1σ and protection levels, m (last 5 min)")
+        plt.title("accuracy 1σ and protection levels, m, log scale (last 5 min)")
+        plt.yscale("log")
         for name, label, color in (
             ("CMP_HACC", "H acc", "green"),
             ("CMP_VACC", "V acc", "cyan"),
             ("CMP_HPL", "HPL", "orange"),
             ("CMP_VPL", "VPL", "magenta"),
         ):
-            hist = m.history[name]
-            if hist and t_now is not None:
+            pts = [(t, v) for t, v in m.history[name] if 0.0 < v < math.inf]
+            if pts and t_now is not None:
                 plt.plot(
-                    [t - t_now for t, _ in hist], [v for _, v in hist], label=label, color=color
+                    [t - t_now for t, _ in pts],
+                    [v for _, v in pts],
+                    label=label,
+                    color=color,
+                    marker="braille",
                 )
         if t_now is not None and any(m.history[n] for n in ("CMP_HPL", "CMP_VPL")):
-            lim = m.snapshot(now)["integrity"]["limits"]["CAT_I"]
-            plt.hline(lim["val_m"], "red")
-            plt.text("CAT I VAL", x=-10.0, y=lim["val_m"], color="red")
-        plt.xlabel("s")
+            lim = m.snapshot(now)["integrity"]["limits"]
+            plt.hline(lim["CAT_I"]["val_m"], "red")
+            plt.hline(lim["CAT_III"]["val_m"], "red")
+        plt.xlabel("s (red: CAT I and CAT III vertical alert limits)")
         acc.refresh()
         trk = self.query_one("#track-plot", PlotextPlot)
         plt = trk.plt
         plt.clear_data()
         plt.clear_figure()
-        plt.title("track")
+        plt.title("track, m from the first position (x: now)")
         if m.track:
-            plt.plot([lon for _, lon in m.track], [lat for lat, _ in m.track], color="cyan")
-            plt.scatter([m.track[-1][1]], [m.track[-1][0]], color="red", marker="x")
-        plt.xlabel("lon °")
+            lat0, lon0 = m.track[0]
+            k_n = math.radians(1.0) * EARTH_RADIUS_M
+            k_e = k_n * math.cos(math.radians(lat0))
+            north = [(lat - lat0) * k_n for lat, _ in m.track]
+            east = [(lon - lon0) * k_e for _, lon in m.track]
+            plt.plot(east, north, color="cyan", marker="braille")
+            plt.scatter([east[-1]], [north[-1]], color="red", marker="x")
+            # the same span on both axes, at least 100 m: a straight line stays straight
+            span = max(max(north) - min(north), max(east) - min(east), 100.0) / 2.0
+            c_n, c_e = (max(north) + min(north)) / 2.0, (max(east) + min(east)) / 2.0
+            plt.ylim(c_n - span, c_n + span)
+            plt.xlim(c_e - span, c_e + span)
+        plt.xlabel("east, m")
         trk.refresh()
