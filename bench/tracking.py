@@ -1,4 +1,4 @@
-"""Benchmark of the ground station's tracking channel: the dynamic channel against Singer and constant velocity.
+"""Benchmark of the ground station's tracking: the dynamic channel against Singer and CV.
 
 Run: ``python bench/tracking.py`` (``--seeds N``, default 3; ``--rates 1,2,5``).
 
@@ -205,7 +205,8 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{'':<13}Singer/dynamic manoeuvre {ratio:.2f}x, loss "
                 f"{rows['singer']['loss'] / rows['dynamic']['loss']:.2f}x; "
-                f"CV/dynamic manoeuvre {rows['cv']['manoeuvre'] / rows['dynamic']['manoeuvre']:.2f}x"
+                f"CV/dynamic manoeuvre "
+                f"{rows['cv']['manoeuvre'] / rows['dynamic']['manoeuvre']:.2f}x"
             )
     print(f"smallest Singer/dynamic manoeuvre ratio: {worst_ratio:.2f}x (goal >= 3)")
     return 0

@@ -131,6 +131,7 @@ def _cmd_console(args: argparse.Namespace) -> int:
         as_json=args.json,
         station=args.station,
         web_port=args.web,
+        web_url=args.web_url,
     )
 
 
@@ -214,6 +215,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="ground station LAT,LON,ALT (deg, deg, m MSL): track the aircraft in az/el/range",
     )
     p.add_argument("--web", type=int, metavar="PORT", help="serve the console to a browser")
+    p.add_argument(
+        "--web-url",
+        metavar="URL",
+        help="--web: the address browsers reach this machine by (http://localhost:PORT)",
+    )
     p.set_defaults(func=_cmd_console)
 
     p = sub.add_parser("config-template", help="print every configuration key with defaults")

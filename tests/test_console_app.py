@@ -174,3 +174,25 @@ def test_console_app_against_a_running_service(tmp_path, ready_state):  # noqa: 
         stop_service(proc)
     err = proc.stderr.read().decode() if proc.stderr else ""
     assert proc.returncode == 0, err
+
+
+def test_console_app_draws_with_nothing_heard():
+    """Nothing heard yet: empty panels and plots, no crash (the log-scale plot has no data)."""
+    app = ConsoleApp(f"udpin:127.0.0.1:{free_udp_port()}", ConsoleModel())
+
+    async def scenario() -> None:
+        async with app.run_test(size=(160, 50)) as pilot:
+            await pilot.pause(1.2)
+            assert text_of(app, "#link").count("never heard") == 2
+            assert "WAITING" in text_of(app, "#nav")
+            await pilot.press("c")  # no service: nothing is sent, and it says so
+            await pilot.pause(0.2)
+            assert "not sent" in text_of(app, "#decisions")
+            app.save_screenshot("empty.svg", str(tmp))
+
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        asyncio.run(scenario())
+        assert (Path(tmp) / "empty.svg").stat().st_size > 0
+    assert app.return_code in (None, 0)

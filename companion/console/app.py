@@ -27,8 +27,9 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Input, Static
+from textual_plotext import PlotextPlot
 
-from companion.console.model import ConsoleModel, NavMode
+from companion.console.model import ConsoleModel, NavMode, boot_text
 from companion.console.send import Sender
 from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, UdpLink, open_link
@@ -57,10 +58,6 @@ MODE_STYLES = {
     NavMode.LOST: "bold white on red",
 }
 
-try:  # plots when textual-plotext is installed, sparklines otherwise
-    from textual_plotext import PlotextPlot
-except ImportError:  # pragma: no cover - the console extra installs it
-    PlotextPlot = None
 
 
 def _num(value: float | None, fmt: str = ".2f", unit: str = "") -> str:
@@ -208,13 +205,10 @@ class ConsoleApp(App[int]):
             yield Panel("outage · heading", id="heading")
             yield Panel("tracking", id="track")
         with Horizontal(id="plots"):
-            if PlotextPlot is not None:
-                with Vertical(classes="plotbox"):
-                    yield PlotextPlot(id="acc-plot")
-                with Vertical(classes="plotbox"):
-                    yield PlotextPlot(id="track-plot")
-            else:  # pragma: no cover
-                yield Static("install the console extra for plots", id="acc-plot")
+            with Vertical(classes="plotbox"):
+                yield PlotextPlot(id="acc-plot")
+            with Vertical(classes="plotbox"):
+                yield PlotextPlot(id="track-plot")
         with Horizontal(id="bottom"):
             yield DataTable(id="alerts", cursor_type="row", zebra_stripes=True)
             with Vertical(id="side"):
@@ -418,12 +412,11 @@ class ConsoleApp(App[int]):
         if len(alerts) < self._alerts_shown:  # the deque rolled over
             table.clear()
             self._alerts_shown = 0
-        from companion.console.model import _boot
 
         for a in alerts[self._alerts_shown :]:
             style = SEVERITY_STYLES.get(a.severity_name, "")
             table.add_row(
-                _boot(a.t_boot_s),
+                boot_text(a.t_boot_s),
                 Text(a.severity_name, style=style),
                 Text(a.text, style=style),
                 "✓" if a.acked else "",
@@ -433,8 +426,6 @@ class ConsoleApp(App[int]):
         self._alerts_shown = len(alerts)
 
     def _draw_plots(self, now: float) -> None:
-        if PlotextPlot is None:  # pragma: no cover
-            return
         m = self.model
         acc = self.query_one("#acc-plot", PlotextPlot)
         plt = acc.plt
@@ -442,14 +433,21 @@ class ConsoleApp(App[int]):
         plt.clear_figure()
         t_now = m.boot_time(now)
         plt.title("accuracy 1σ and protection levels, m, log scale (last 5 min)")
-        plt.yscale("log")
+        series = {
+            name: [(t, v) for t, v in m.history[name] if 0.0 < v < math.inf]
+            for name in ("CMP_HACC", "CMP_VACC", "CMP_HPL", "CMP_VPL")
+        }
+        if t_now is None or not any(series.values()):
+            t_now = None  # nothing to draw yet: an empty (linear) frame
+        else:
+            plt.yscale("log")
         for name, label, color in (
             ("CMP_HACC", "H acc", "green"),
             ("CMP_VACC", "V acc", "cyan"),
             ("CMP_HPL", "HPL", "orange"),
             ("CMP_VPL", "VPL", "magenta"),
         ):
-            pts = [(t, v) for t, v in m.history[name] if 0.0 < v < math.inf]
+            pts = series[name]
             if pts and t_now is not None:
                 plt.plot(
                     [t - t_now for t, _ in pts],

@@ -67,6 +67,7 @@ def run_console(
     as_json: bool = False,
     station: str | None = None,
     web_port: int | None = None,
+    web_url: str | None = None,
 ) -> int:
     """``companion console``; returns the exit status."""
     try:
@@ -95,14 +96,18 @@ def run_console(
         )
         return 1
     if web_port is not None:
-        return _serve(url, station, web_port)
+        return _serve(url, station, web_port, web_url)
     app = ConsoleApp(url, model)
     app.run()
     return 0
 
 
-def _serve(url: str, station: str | None, port: int) -> int:
-    """The same app in a browser: textual-serve runs ``companion console`` per session."""
+def _serve(url: str, station: str | None, port: int, public_url: str | None) -> int:
+    """The same app in a browser: textual-serve runs ``companion console`` per session.
+
+    ``public_url`` is the address the browser reaches this machine by (the page opens
+    its websocket there): ``http://localhost:PORT`` unless given.
+    """
     try:
         from textual_serve.server import Server
     except ImportError:
@@ -114,5 +119,11 @@ def _serve(url: str, station: str | None, port: int) -> int:
     cmd = [sys.executable, "-m", "companion", "console", "--master", url]
     if station is not None:
         cmd += ["--station", station]
-    Server(shlex.join(cmd), host="0.0.0.0", port=port, title="companion console").serve()
+    Server(
+        shlex.join(cmd),
+        host="0.0.0.0",
+        port=port,
+        title="companion console",
+        public_url=public_url or f"http://localhost:{port}",
+    ).serve()
     return 0

@@ -450,7 +450,7 @@ class ConsoleModel:
         if not self.alerts:
             lines.append("  (none)")
         for a in list(self.alerts)[-8:][::-1]:
-            lines.append(f"  {_boot(a.t_boot_s)} {a.severity_name:<6} {a.text}")
+            lines.append(f"  {boot_text(a.t_boot_s)} {a.severity_name:<6} {a.text}")
         return "\n".join(lines)
 
 
@@ -486,7 +486,7 @@ def _f(value: float | None, fmt: str = ".2f") -> str:
     return "—" if value is None else format(value, fmt)
 
 
-def _boot(t_boot_s: float | None) -> str:
+def boot_text(t_boot_s: float | None) -> str:
     """Autopilot time as ``T+mm:ss.s`` (since boot)."""
     if t_boot_s is None:
         return "T+--:--.-"

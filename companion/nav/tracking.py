@@ -299,7 +299,7 @@ class Tracker:
         return True
 
     def acceleration(self, t_s: float, acc_ned_mps2: FloatArray) -> bool:
-        """The dynamic channel's second observation: the aircraft's acceleration (station NED, m/s²)."""
+        """Second observation: the aircraft's acceleration (station NED, m/s²)."""
         if self.model != "dynamic":
             return False
         if not np.all(np.isfinite(acc_ned_mps2)) or not self._advance(t_s):
