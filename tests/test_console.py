@@ -88,3 +88,37 @@ def test_console_tracks_from_a_station(tmp_path):
     later = state.snapshot(t + 5.0)["track"]
     assert later["predicted_s"] > 4.5
     assert later["pointing_sigma_deg"] > snap["track"]["pointing_sigma_deg"]
+
+
+def test_console_json_returns_within_duration_when_nothing_is_heard():
+    import json
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-m", "companion", "console", "--master", f"udpin:127.0.0.1:{port}"]
+        + ["--json", "--duration", "1"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 1  # nothing heard
+    snap = json.loads(proc.stdout)
+    assert snap["link"]["service_stale"] and snap["navigation"]["mode"] == "waiting"
+    assert time.monotonic() - t0 < 30.0  # the process start dominates; the wait is 1 s
+    bad = subprocess.run(
+        [sys.executable, "-m", "companion", "console", "--master", "udpin:127.0.0.1:1"]
+        + ["--once", "--station", "95,0,0"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert bad.returncode == 1 and "station" in bad.stderr and bad.stderr.count("\n") == 1
