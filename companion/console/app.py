@@ -59,7 +59,6 @@ MODE_STYLES = {
 }
 
 
-
 def _num(value: float | None, fmt: str = ".2f", unit: str = "") -> str:
     return "—" if value is None else f"{format(value, fmt)}{unit}"
 
