@@ -143,9 +143,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_console(args: argparse.Namespace) -> int:
-    from companion.console.app import run_console
+    from companion.console.main import run_console
 
-    return run_console(args.master, once=args.once, duration_s=args.duration)
+    return run_console(
+        args.master,
+        once=args.once,
+        duration_s=args.duration,
+        as_json=args.json,
+        station=args.station,
+        web_port=args.web,
+        web_url=args.web_url,
+    )
 
 
 def _cmd_inspect(args: argparse.Namespace) -> int:
@@ -240,7 +248,20 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("console", help="watch the service from the ground (terminal)")
     p.add_argument("--master", required=True, help="link URL on which the service is heard")
     p.add_argument("--once", action="store_true", help="print one status screen and exit")
-    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--json", action="store_true", help="print the status as JSON and exit")
+    p.add_argument(
+        "--duration", type=float, help="--once/--json: give up after this many seconds (5)"
+    )
+    p.add_argument(
+        "--station",
+        help="ground station LAT,LON,ALT (deg, deg, m MSL): track the aircraft in az/el/range",
+    )
+    p.add_argument("--web", type=int, metavar="PORT", help="serve the console to a browser")
+    p.add_argument(
+        "--web-url",
+        metavar="URL",
+        help="--web: the address browsers reach this machine by (http://localhost:PORT)",
+    )
     p.set_defaults(func=_cmd_console)
 
     p = sub.add_parser("config-template", help="print every configuration key with defaults")

@@ -1,0 +1,126 @@
+"""The ground station's tracking channel (companion.nav.tracking): kinematics in closed
+form, the dynamic channel and its baselines on a simulated banked turn with truth, rejections."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from companion.nav.tracking import (
+    Tracker,
+    acceleration_ned,
+    los_to_ned,
+    los_velocity_ned,
+    ned_to_spherical,
+    pointing_error_rad,
+    spherical_rates,
+)
+from companion.sim.scenarios import build_script, make_scenario
+from companion.sim.trajectory import gravity_down_mps2
+
+STATION = np.array([-900.0, 1200.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def turn_path():
+    sc = make_scenario("cruise_gnss_loss", cruise_turns_deg=(180.0,), bank_deg=30.0)
+    b = build_script(sc)
+    return b, b.build(sc.frame, sc.wind_ned_mps, fixed_wing=True)
+
+
+def test_spherical_rates_match_numerical_derivatives(turn_path):
+    b, path = turn_path
+    turn = [s for s in b.segments if s.end[1] != 0.0][0]
+    t = np.array([turn.t1_s + 3.0])
+    h = 1e-3
+    st = path.evaluate(np.array([t[0] - h, t[0], t[0] + h]))
+    sph = np.array([ned_to_spherical(p - STATION) for p in st.pos_ned_m])
+    sph[:, 0] = np.unwrap(sph[:, 0])
+    first_num = (sph[2] - sph[0]) / (2 * h)
+    second_num = (sph[2] - 2 * sph[1] + sph[0]) / h**2
+    first, second = spherical_rates(
+        st.pos_ned_m[1] - STATION, st.vel_ned_mps[1], st.acc_ned_mps2[1]
+    )
+    np.testing.assert_allclose(first, first_num, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(second, second_num, rtol=1e-3, atol=1e-7)
+    # the velocity back from the angles' rates, and the acceleration from attitude and
+    # specific force, are the path's
+    az, el, dist = ned_to_spherical(st.pos_ned_m[1] - STATION)
+    np.testing.assert_allclose(los_to_ned(az, el, dist), st.pos_ned_m[1] - STATION, atol=1e-9)
+    np.testing.assert_allclose(los_velocity_ned(az, el, dist, first), st.vel_ned_mps[1], atol=1e-6)
+    g = gravity_down_mps2(path.frame, st.pos_ned_m[1:2])[0]
+    acc = acceleration_ned(st.mat_nb[1], st.f_b_mps2[1], g)
+    np.testing.assert_allclose(acc, st.acc_ned_mps2[1], atol=1e-9)
+    assert np.linalg.norm(acc[:2]) > 4.0  # a 30 deg bank: about 0.58 g across the track
+
+
+def _track(path, t0, t1, model, rate_hz=2.0, seed=3, loss=None):
+    rng = np.random.default_rng(seed)
+    tracker = Tracker(model)
+    t_tel = np.arange(t0, t1, 1.0 / rate_hz)
+    st = path.evaluate(t_tel)
+    g = gravity_down_mps2(path.frame, st.pos_ned_m)
+    errs, sigmas = [], []
+    for i, t in enumerate(t_tel):
+        rel = st.pos_ned_m[i] - STATION
+        est = tracker.estimate(float(t))  # predicted to the sample, before it is used
+        if est is not None and t > t0 + 10.0:
+            errs.append(pointing_error_rad(est, rel))
+            sigmas.append(est.pointing_sigma_rad)
+        if loss is not None and loss[0] <= t < loss[1]:
+            continue
+        tracker.position(float(t), rel + rng.normal(0.0, 2.0, 3))
+        tracker.acceleration(float(t), acceleration_ned(st.mat_nb[i], st.f_b_mps2[i], g[i]))
+    return np.array(errs), np.array(sigmas), tracker
+
+
+def test_s2_tracks_a_banked_turn_better_than_singer_and_cv(turn_path):
+    b, path = turn_path
+    turn = [s for s in b.segments if s.end[1] != 0.0][0]
+    t0, t1 = turn.t0_s - 20.0, turn.t1_s + 40.0
+    rms = {}
+    for model in ("dynamic", "singer", "cv"):
+        errs, sigmas, trk = _track(path, t0, t1, model)
+        rms[model] = float(np.sqrt(np.mean(errs**2)))
+        if model == "dynamic":
+            assert trk.accelerations == trk.positions
+            # its stated uncertainty covers its error (2-D pointing error: 3 sigma)
+            assert np.mean(errs <= 3.0 * sigmas) > 0.95
+        else:
+            assert trk.accelerations == 0
+    assert rms["dynamic"] < 0.7 * rms["singer"] and rms["singer"] < rms["cv"], rms
+
+
+def test_prediction_through_a_telemetry_loss_grows_its_uncertainty(turn_path):
+    b, path = turn_path
+    turn = [s for s in b.segments if s.end[1] != 0.0][0]
+    loss = (turn.t1_s + 5.0, turn.t1_s + 10.0)
+    _, _, trk = _track(path, turn.t0_s - 20.0, loss[0], "dynamic")
+    e0 = trk.estimate(loss[0])
+    e1 = trk.estimate(loss[1])
+    assert e0 is not None and e1 is not None
+    assert e1.since_position_s > e0.since_position_s + 4.9
+    assert e1.pointing_sigma_rad > 2.0 * e0.pointing_sigma_rad
+    truth = path.evaluate(np.array([loss[1]])).pos_ned_m[0] - STATION
+    assert pointing_error_rad(e1, truth) < 3.0 * e1.pointing_sigma_rad
+    assert pointing_error_rad(e1, truth) < math.radians(1.5)
+
+
+def test_bad_samples_are_counted_not_fatal():
+    trk = Tracker("dynamic")
+    assert trk.estimate(0.0) is None
+    assert not trk.acceleration(0.0, np.zeros(3))  # before any position: ignored
+    assert trk.position(1.0, np.array([1000.0, -1.0, -100.0]))
+    assert not trk.position(2.0, np.array([np.nan, 0.0, 0.0]))
+    assert not trk.position(0.5, np.array([1000.0, 1.0, -100.0]))  # older than the filter
+    assert not trk.position(3.0, np.array([1.0, 1.0, 0.0]))  # on the station
+    assert not trk.acceleration(3.0, np.array([np.inf, 0.0, 0.0]))
+    assert trk.rejected == 4
+    # across north the azimuth wraps, it does not swing the long way round
+    assert trk.position(2.0, np.array([1000.0, 1.0, -100.0]))
+    est = trk.estimate(2.0)
+    assert est is not None and abs(est.az_rad) < math.radians(1.0)
+    with pytest.raises(ValueError):
+        Tracker("kalman")  # type: ignore[arg-type]
