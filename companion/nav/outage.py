@@ -493,7 +493,13 @@ class OutageMonitor:
         if not moving:
             rx.anchor_t_s, rx.anchor_pos, rx.moved_expected_m = fix.t_s, pos, 0.0
             return ""
-        if rx.anchor_t_s is None or rx.anchor_pos is None or rx.last_t_s is None:
+        if (
+            rx.anchor_t_s is None
+            or rx.anchor_pos is None
+            or rx.last_t_s is None
+            or fix.t_s - rx.last_t_s > self._check_config().max_increment_dt_s
+        ):
+            # (after a gap in the fixes the speed says nothing about the distance)
             rx.anchor_t_s, rx.anchor_pos, rx.moved_expected_m = fix.t_s, pos, 0.0
             return ""
         rx.moved_expected_m += speed_mps * max(0.0, fix.t_s - rx.last_t_s)

@@ -202,3 +202,142 @@ def test_long_bridge_is_lost():
 def test_config_validation_names_the_field(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         OutageConfig(**bad)
+
+
+# ---------------------------------------------------------------- bounded rejection
+
+
+def rx_fix(t, offset=(0.0, 0.0, 0.0), receiver_id=0):
+    """A 3D fix on the line, 10 satellites, HDOP 1.2, h_acc 2 m (5 Hz in the tests below)."""
+    f = fix_at(
+        t,
+        LINE.pos_ned_m(t, 0.0) + np.array(offset),
+        np.array(LINE.vel_ned_mps),
+        fix_type=FixType.FIX_3D,
+        h_acc_m=2.0,
+        receiver_id=receiver_id,
+    )
+    return replace(f, satellites=10, hdop=1.2)
+
+
+def used_until(mon, t_end, **kw):
+    """Fixes every 0.2 s up to ``t_end``, each used by the navigator."""
+    for k in range(int(round(t_end / 0.2)) + 1):
+        f = rx_fix(k * 0.2, **kw)
+        v = mon.assess(f)
+        assert v.usable and not v.reinitialise
+        mon.gate_result(f.t_s, True)
+        mon.used(f)
+    return (k + 1) * 0.2
+
+
+def test_a_healthy_receiver_against_a_drifting_prediction_resets_the_navigator():
+    """The gate rejects a receiver that moved from its last used fix exactly as its own
+    velocity says: the prediction is what is off. After reset_after_rejected_fixes the
+    next fix re-initialises the navigator, with one FAULT alert saying so."""
+    mon = OutageMonitor()
+    t = used_until(mon, 4.0)
+    verdicts = []
+    for k in range(4):
+        f = rx_fix(t + k * 0.2)
+        v = mon.assess(f)
+        verdicts.append(v)
+        if v.reinitialise:
+            break
+        mon.rejected(f)
+        mon.gate_result(f.t_s, False)
+    assert [v.reinitialise for v in verdicts] == [False, False, True]
+    assert codes(verdicts[-1].alerts) == [AlertCode.FAULT]
+    assert "navigator reset to it" in verdicts[-1].alerts[0].text
+    assert mon.resets == 1
+
+
+def test_a_frozen_receiver_is_stale_by_its_own_velocity_and_never_reset_to():
+    """Same co-ordinates while its velocity says 31.6 m/s: stale at the second repeat,
+    whatever the navigator predicts, and never a reset however long it lasts."""
+    mon = OutageMonitor()
+    t = used_until(mon, 4.0)
+    frozen = rx_fix(t - 0.2)
+    verdicts = [mon.assess(replace(frozen, t_s=t + k * 0.2)) for k in range(50)]
+    assert not any(v.usable for v in verdicts)
+    assert codes(verdicts[0].alerts) == [AlertCode.GNSS_STALE]
+    assert sum(AlertCode.GNSS_STALE in codes(v.alerts) for v in verdicts) == 1
+    assert not any(v.reinitialise for v in verdicts)
+
+
+def test_the_same_fix_twice_is_a_repeat_without_an_alert():
+    mon = OutageMonitor()
+    t = used_until(mon, 2.0)
+    again = mon.assess(rx_fix(t - 0.2))
+    assert not again.usable and again.reason == "repeated" and again.alerts == ()
+
+
+def test_after_a_glitch_the_reset_waits_for_the_bounded_rejection_time():
+    """A 30 m step breaks the receiver's chain: its innovation may be right. The reset
+    comes only after reset_after_rejection_s with the receiver consistent since the step
+    (ArduPilot EKF3's glitch handling: gate, then after a timeout reset to GNSS)."""
+    cfg = OutageConfig()
+    mon = OutageMonitor(cfg)
+    t0 = used_until(mon, 4.0)
+    reset_at = None
+    for k in range(40):
+        f = rx_fix(t0 + k * 0.2, offset=(30.0, 0.0, 0.0))
+        v = mon.assess(f)
+        if v.reinitialise:
+            reset_at = f.t_s
+            break
+        mon.rejected(f)
+    assert reset_at is not None
+    assert reset_at - t0 >= cfg.reset_after_rejection_s
+    assert reset_at - t0 <= cfg.reset_after_rejection_s + 0.5
+
+
+def test_a_receiver_contradicted_by_a_second_receiver_is_never_reset_to():
+    """A 30 m step on receiver 0 while receiver 1 (consistent) stays on the line."""
+    mon = OutageMonitor()
+    for k in range(21):
+        for rid in (0, 1):
+            f = rx_fix(k * 0.2, receiver_id=rid)
+            mon.assess(f)
+            mon.gate_result(f.t_s, True)
+            mon.used(f)
+    for k in range(1, 60):
+        t = 4.0 + k * 0.2
+        mon.assess(rx_fix(t, receiver_id=1))
+        f = rx_fix(t, offset=(30.0, 0.0, 0.0))
+        v = mon.assess(f)
+        assert not v.reinitialise, t
+        mon.rejected(f)
+
+
+def test_independent_evidence_stops_the_rejection_clock():
+    mon = OutageMonitor()
+    t = used_until(mon, 4.0)
+    for k in range(30):
+        f = rx_fix(t + k * 0.2)
+        assert not mon.assess(f, shown_wrong=True).reinitialise
+        mon.rejected(f)
+    mon.rejection_explained(0)
+    assert mon.rejected_for_s(0, t + 6.0) == 0.0
+
+
+def test_reset_alerts_are_rate_limited_and_counted():
+    """A reset every 0.6 s for 8 s: one alert per 5 s interval, the next one counting the
+    resets in between."""
+    mon = OutageMonitor(OutageConfig(reset_alert_interval_s=5.0))
+    t = used_until(mon, 4.0)
+    alerts = []
+    while t < 12.0:
+        f = rx_fix(t)
+        t += 0.2
+        v = mon.assess(f)
+        if v.reinitialise:
+            alerts += v.alerts
+            mon.reinitialised(f.t_s)
+            mon.used(f)
+        else:
+            mon.rejected(f)
+    assert mon.resets >= 10
+    assert len(alerts) == 2
+    assert alerts[1].t_s - alerts[0].t_s >= 5.0
+    assert "more since the last alert" in alerts[1].text
