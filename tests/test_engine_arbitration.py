@@ -132,3 +132,26 @@ def test_a_min_rate_of_zero_disables_the_check():
     engine = Engine(EngineConfig(navigator="blend", min_imu_rate_hz=0.0))
     run(line_stream(20.0, line=LINE, imu_hz=10.0, gnss_hz=5.0), engine)
     assert engine.navigators.navigator is engine.navigators.primary
+
+
+def test_a_height_fault_is_not_vouched_for_by_horizontal_evidence():
+    """The receiver's height steps 30 m while its horizontal track stays consistent: its
+    own evidence (horizontal increments against its velocity) does not cover the height,
+    so no rejected fix is fused ungated and no early reset happens; the published height
+    stays on the truth until the bounded rejection time has passed."""
+
+    def height_step(stream):
+        for s in stream:
+            if isinstance(s, GnssFix) and s.t_s >= 25.0:
+                s = replace(s, alt_msl_m=s.alt_msl_m + 30.0)
+            yield s
+
+    engine = Engine(EngineConfig(navigator="blend"))
+    stream = line_stream(35.0, line=LINE, gnss_hz=5.0, noise_m=0.01, seed=3)
+    outs = run(height_step(stream), engine)
+    assert engine.stats.gnss["fused_vouched"] == 0
+    bound_s = engine.outage.config.reset_after_rejection_s
+    for s in outs:
+        if isinstance(s, NavSolution) and 25.0 <= s.t_s < 25.0 + bound_s - 0.2:
+            pos = ORIGIN.lla_to_ned(s.lat_rad, s.lon_rad, s.alt_msl_m)
+            assert abs(pos[2] - LINE.pos_ned_m(s.t_s, 10.0)[2]) < 2.0, s.t_s

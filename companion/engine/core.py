@@ -347,8 +347,10 @@ class Engine:
             # the receiver's own evidence vouches for the fix: the gate measured the
             # prediction's error; fused anyway (repeated, the outage monitor resets)
             if self.outage.vouched(fix) and not self.integrity.fde.shown_wrong(rid):
-                vouched = True
-                update = navs.force(meas)
+                update = navs.force(meas, update)
+                vouched = update.fused
+                if not vouched:  # its height failed: beyond what its own evidence covers
+                    self.outage.rejection_unvouched(rid)
         if update.fused:
             self.stats.gnss["fused_vouched" if vouched else "fused"] += 1
             if not vouched:

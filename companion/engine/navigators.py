@@ -24,6 +24,8 @@ import logging
 import math
 from collections import deque
 
+from scipy.stats import chi2
+
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.motion import SingerConfig, SingerNavigator
@@ -35,6 +37,19 @@ log = logging.getLogger(__name__)
 
 FALLBACK_BACKLOG_FIXES = 600
 """Fixes held for the fallback while the blend runs (a minute of a 10 Hz receiver)."""
+
+
+VERTICAL_GATE_CHI2 = float(chi2.isf(1e-4, 1))
+"""The height innovation's own gate (1 dof, false-alarm probability 1e-4: 15.1)."""
+
+
+def vertical_within_gate(update: GnssUpdate) -> bool:
+    """Is the height part of a position innovation within :data:`VERTICAL_GATE_CHI2`?"""
+    s_dd = float(update.innovation_cov[2, 2])
+    if not s_dd > 0.0 or not math.isfinite(s_dd):
+        return False
+    d = float(update.innovation[2])
+    return d * d / s_dd <= VERTICAL_GATE_CHI2
 
 
 IMU_RATE_WINDOW_S = 2.0
@@ -213,9 +228,13 @@ class Navigators:
             primary.on_gnss(meas, gate=gate and primary.initialised)
         return update
 
-    def force(self, meas: GnssMeasurement) -> GnssUpdate:
-        """Fuse ``meas``, which the carrying navigator's gate just rejected, without the gate
-        (the receiver's own evidence vouches for it: the prediction is what is off)."""
+    def force(self, meas: GnssMeasurement, rejected: GnssUpdate) -> GnssUpdate:
+        """Fuse ``meas``, which the carrying navigator's gate just rejected (``rejected``),
+        without the gate: the receiver's own evidence vouches for it, the prediction is
+        what is off. That evidence is horizontal (GPS_RAW_INT has no vertical velocity):
+        when the height alone fails its gate, ``rejected`` is returned unchanged."""
+        if not vertical_within_gate(rejected):
+            return rejected
         primary = self.primary
         if primary is not None and self.navigator is primary:
             backlog = self.backlog

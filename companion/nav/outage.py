@@ -172,6 +172,9 @@ class _ReceiverState:
     """Time of its last fix the engine used."""
     rejected_fixes: int = 0
     """Its fixes rejected since the last used one."""
+    unvouched: bool = False
+    """One of those was rejected for what its own evidence does not cover (its height):
+    no early reset, only the bounded time's."""
 
 
 @dataclass(slots=True)
@@ -276,6 +279,13 @@ class OutageMonitor:
         if rx.rejected_since_t_s is None:
             rx.rejected_since_t_s = fix.t_s
 
+    def rejection_unvouched(self, receiver_id: int) -> None:
+        """The last rejection was for what the receiver's own evidence does not cover (its
+        height): no reset before ``reset_after_rejection_s``."""
+        rx = self._receivers.get(receiver_id)
+        if rx is not None:
+            rx.unvouched = True
+
     def rejection_explained(self, receiver_id: int) -> None:
         """The receiver is held out on independent evidence (another receiver, a
         reference): its rejection clock stops; no reset is due to it."""
@@ -283,6 +293,7 @@ class OutageMonitor:
         if rx is not None:
             rx.rejected_since_t_s = None
             rx.rejected_fixes = 0
+            rx.unvouched = False
 
     def used(self, fix: GnssFix) -> None:
         """The engine used this fix: the receiver's rejection clock stops."""
@@ -290,6 +301,7 @@ class OutageMonitor:
         if rx is not None:
             rx.rejected_since_t_s = None
             rx.rejected_fixes = 0
+            rx.unvouched = False
             rx.last_used_t_s = fix.t_s
 
     def rejected_for_s(self, receiver_id: int, t_s: float) -> float:
@@ -443,7 +455,7 @@ class OutageMonitor:
             return ""
         start = rx.checks.chain_start_t_s
         linked = start is not None and rx.last_used_t_s is not None and start <= rx.last_used_t_s
-        if linked and rx.rejected_fixes >= cfg.reset_after_rejected_fixes:
+        if linked and rx.rejected_fixes >= cfg.reset_after_rejected_fixes and not rx.unvouched:
             why = f"rx{fix.receiver_id} moved as its velocity says since its last used fix"
         elif t - since >= cfg.reset_after_rejection_s:
             why = f"rx{fix.receiver_id} rejected {t - since:.1f} s but self-consistent"
