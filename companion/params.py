@@ -313,6 +313,15 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENC_UERE", "encoder.uere_m"),
     ("ENC_GPS_YAW", "encoder.gps_input_yaw"),
     ("ENC_STXT_INTVL", "encoder.statustext_min_interval_s"),
+    # added later, at the end so that earlier indices do not move
+    ("ENG_IMU_MIN_RATE", "engine.min_imu_rate_hz"),
+    ("ENG_IMU_HOLD", "engine.imu_rate_hold_s"),
+    ("OUT_RESET_REJ", "outage.reset_after_rejection_s"),
+    ("OUT_RESET_NREJ", "outage.reset_after_rejected_fixes"),
+    ("OUT_RESET_ALERT", "outage.reset_alert_interval_s"),
+    ("OUT_MIN_SATS", "outage.min_satellites"),
+    ("OUT_MAX_HDOP", "outage.max_hdop"),
+    ("OUT_CONTRA_SIG", "outage.contradiction_sigmas"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

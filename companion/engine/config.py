@@ -30,6 +30,13 @@ class EngineConfig:
     model, no IMU) or 'passthrough' (GNSS with constant-velocity extrapolation)."""
     imu_timeout_s: float = ranged(0.5, gt=0.0, le=5.0)
     """The blend carries the solution only while an IMU sample is at most this old."""
+    min_imu_rate_hz: float = ranged(20.0, ge=0.0)
+    """... and while the IMU's measured rate is at least this: below it the IMU cannot
+    dead-reckon (a 10 Hz log, or 1 Hz through a telemetry radio) and the pass-through's
+    constant velocity carries the solution instead. 0 disables the check."""
+    imu_rate_hold_s: float = ranged(5.0, ge=0.0)
+    """The IMU counts as usable again only after its rate has held this long (and after
+    an IMU timeout): no flapping between navigators."""
     primary_receiver: int = ranged(0, choices=(0, 1))
     """The receiver fused normally; the other is fused only while this one is unusable
     (and is always the integrity monitor's independent solution)."""

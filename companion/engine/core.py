@@ -36,8 +36,6 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from companion.engine.bridge import PotentialBridge
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
@@ -50,7 +48,7 @@ from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
-from companion.nav.navigator import NavState
+from companion.nav.navigator import GnssMeasurement, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
 from companion.types import (
@@ -185,7 +183,13 @@ class Engine:
         (its counters kept), bridge, publisher, local frame and inertial references. The
         heading correction, the landed state and the clocks are the caller's."""
         cfg = self.config
-        self.navigators = Navigators(cfg.navigator, self._blend_config, cfg.imu_timeout_s)
+        self.navigators = Navigators(
+            cfg.navigator,
+            self._blend_config,
+            cfg.imu_timeout_s,
+            cfg.min_imu_rate_hz,
+            cfg.imu_rate_hold_s,
+        )
         self.outage = OutageMonitor(self._outage_config)
         """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity.reset()
@@ -193,8 +197,6 @@ class Engine:
         self.publisher = Publisher(cfg.status_rate_hz, self.outage, self.integrity, self.bridge)
         self.coast: InertialCoast | None = None
         """The free-inertial references (with the blend, once the frame exists)."""
-        self._speed_mps: float | None = None
-        """Ground speed of the last published state (the stale-fix test's motion)."""
         self._rx_last_usable_t_s: dict[int, float] = {}
         self.frame: LocalFrame | None = None
         self._next_outage_tick_s = -math.inf
@@ -378,7 +380,9 @@ class Engine:
         outputs: list[Output] = [] if self._airborne else self.heading.on_gnss(fix)
         navs = self.navigators
         navs.select(self.now_s)
-        verdict = self.outage.assess(fix, self._speed_mps)
+        rid = fix.receiver_id
+        # another receiver's separation (or a reference) showed it wrong: no reset to it
+        verdict = self.outage.assess(fix, shown_wrong=self.integrity.fde.shown_wrong(rid))
         outputs += verdict.alerts
         if not verdict.usable:
             self.stats.gnss[verdict.reason] += 1
@@ -397,40 +401,65 @@ class Engine:
         )
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
-            self.stats.gnss[f"rx{fix.receiver_id}_monitored"] += 1
-            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
-            return outputs
-        if self.integrity.exclude(fix.receiver_id):
-            self.stats.gnss["excluded"] += 1
+            self.stats.gnss[f"rx{rid}_monitored"] += 1
             outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
         if verdict.reinitialise:
-            navs.reinitialise(meas)
-            self.bridge.restart()
-            self.bridge.add_fix(meas)
-            outputs += self.outage.reinitialised(fix.t_s)
-            self.stats.gnss["reinitialised"] += 1
-            self.publisher.last_fused_fix = fix
+            # rejected by the innovation alone for long enough, or after an outage beyond
+            # the gate: the navigator, not the self-consistent receiver, is what is off
+            return outputs + self._reset_to(fix, meas)
+        if self.integrity.exclude(rid):
+            self.stats.gnss["excluded"] += 1
+            if self.integrity.fde.shown_wrong(rid):
+                self.outage.rejection_explained(rid)  # independent evidence: no reset clock
+            else:
+                self.outage.rejected(fix)
+            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
         predicted = self.bridge.reference(meas.t_s)
         update = navs.on_gnss(meas, verdict.gate)
+        vouched = False
+        if not update.fused and update.reason == "gate":
+            self.stats.gnss["gate_rejected"] += 1
+            self.outage.rejected(fix)
+            # the receiver's own evidence vouches for the fix: the gate measured the
+            # prediction's error; fused anyway (repeated, the outage monitor resets)
+            if self.outage.vouched(fix) and not self.integrity.fde.shown_wrong(rid):
+                update = navs.force(meas, update)
+                vouched = update.fused
+                if not vouched:  # its height failed: beyond what its own evidence covers
+                    self.outage.rejection_unvouched(rid)
         if update.fused:
-            self.stats.gnss["fused"] += 1
+            self.stats.gnss["fused_vouched" if vouched else "fused"] += 1
+            if not vouched:
+                self.outage.used(fix)
             self.publisher.last_fused_fix = fix
             self.publisher.satellites = fix.satellites or 0
             self.bridge.add_fix(meas)
-        else:
-            self.stats.gnss["gate_rejected" if update.reason == "gate" else update.reason] += 1
+        elif update.reason != "gate":
+            self.stats.gnss[update.reason] += 1
         # after a gap the navigator's prediction, not the receiver, is what is uncertain: a
         # failed innovation then is the outage logic's (gate, reacquire, re-initialise), and
-        # must not exclude the receiver (which would stop the re-initialisation forever)
-        bridged = verdict.gate and self.outage.mode in OUTAGE_MODES
+        # must not exclude the receiver (which would stop the re-initialisation forever);
+        # nor must the innovation of a fix the receiver's own evidence vouches for
+        bridged = (verdict.gate and self.outage.mode in OUTAGE_MODES) or vouched
         outputs += self.integrity.on_fix(
             fix, meas, None if bridged else update, predicted=predicted, references=refs
         )
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    def _reset_to(self, fix: GnssFix, meas: GnssMeasurement) -> list[Output]:
+        """Re-initialise every navigator from ``fix`` (its exclusion, if any, lifted)."""
+        self.integrity.fde.pardon(fix.receiver_id)
+        self.navigators.reinitialise(meas)
+        self.bridge.restart()
+        self.bridge.add_fix(meas)
+        self.outage.used(fix)
+        self.stats.gnss["reinitialised"] += 1
+        self.publisher.last_fused_fix = fix
+        return list(self.outage.reinitialised(fix.t_s))
 
     def _fuse_receiver(self, fix: GnssFix) -> bool:
         """Fuse the primary receiver; the other only while the primary is unusable."""
@@ -544,7 +573,6 @@ class Engine:
         state = self._state_now(t_s)
         if state is None or self.frame is None:
             return []
-        self._speed_mps = float(np.hypot(state.vel_ned_mps[0], state.vel_ned_mps[1]))
         self._anchor_coast()
         if self._maybe_reanchor(state):
             state = self._state_now(t_s)

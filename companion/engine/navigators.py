@@ -1,10 +1,15 @@
-"""Which navigator carries the solution: the blend on a live IMU stream, else the fallback.
+"""Which navigator carries the solution: the blend on a usable IMU stream, else the fallback.
 
 ``EngineConfig.navigator`` chooses the set:
 
 * ``blend``: the GNSS/INS blend (:mod:`companion.nav.blend`) is the primary; the GNSS
   pass-through (:mod:`companion.nav.passthrough`) is the fallback that takes over
-  while no IMU sample is newer than ``imu_timeout_s``;
+  while no IMU sample is newer than ``imu_timeout_s``, or while the IMU's measured
+  rate is below ``min_imu_rate_hz`` (:class:`ImuRate`: an IMU delivered at 10 Hz, or
+  at 1 Hz through a telemetry radio, cannot dead-reckon; constant velocity, whose
+  covariance grows honestly, carries instead). The blend takes over again only after
+  the rate has held for ``imu_rate_hold_s`` (no flapping between navigators), and
+  restarts from the next fix (what it integrated meanwhile is not trusted);
 * ``singer``: the Singer manoeuvre model (:mod:`companion.nav.motion`) alone, no IMU;
 * ``passthrough``: the pass-through alone.
 
@@ -19,6 +24,8 @@ import logging
 import math
 from collections import deque
 
+from scipy.stats import chi2
+
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.motion import SingerConfig, SingerNavigator
@@ -32,11 +39,103 @@ FALLBACK_BACKLOG_FIXES = 600
 """Fixes held for the fallback while the blend runs (a minute of a 10 Hz receiver)."""
 
 
+VERTICAL_GATE_CHI2 = float(chi2.isf(1e-4, 1))
+"""The height innovation's own gate (1 dof, false-alarm probability 1e-4: 15.1)."""
+
+
+def vertical_within_gate(update: GnssUpdate) -> bool:
+    """Is the height part of a position innovation within :data:`VERTICAL_GATE_CHI2`?"""
+    s_dd = float(update.innovation_cov[2, 2])
+    if not s_dd > 0.0 or not math.isfinite(s_dd):
+        return False
+    d = float(update.innovation[2])
+    return d * d / s_dd <= VERTICAL_GATE_CHI2
+
+
+IMU_RATE_WINDOW_S = 2.0
+"""The IMU's rate is measured over windows of this length (autopilot clock)."""
+
+
+class ImuRate:
+    """The IMU's measured sample rate and whether it can support dead reckoning.
+
+    Samples with a time not after the previous one (the same sample from a second
+    MAVLink stream) are not counted. Unknown before the first window closes (then the
+    IMU counts as usable: a healthy stream is not held back at start-up). Below
+    ``min_rate_hz`` it is unusable at once; it is usable again after the rate has held
+    at or above it for ``hold_s`` (hysteresis in time), and after any IMU timeout.
+    """
+
+    def __init__(self, min_rate_hz: float, hold_s: float) -> None:
+        self.min_rate_hz = min_rate_hz
+        self.hold_s = hold_s
+        self.rate_hz: float | None = None
+        """The last window's measured rate (None before the first window closes)."""
+        self.usable = True
+        self.changes = 0
+        """How many times ``usable`` changed."""
+        self._last_t_s = -math.inf
+        self._window_start_s: float | None = None
+        self._window_n = 0
+        self._good_since_s: float | None = None
+
+    def on_sample(self, t_s: float) -> None:
+        """Count one IMU sample at ``t_s``."""
+        if t_s <= self._last_t_s:
+            return
+        self._last_t_s = t_s
+        start = self._window_start_s
+        if start is None:
+            self._window_start_s = t_s
+            self._window_n = 0
+            return
+        self._window_n += 1
+        if t_s - start < IMU_RATE_WINDOW_S:
+            return
+        rate = self._window_n / (t_s - start)
+        self.rate_hz = rate
+        self._window_start_s = t_s
+        self._window_n = 0
+        if rate < self.min_rate_hz:
+            self._good_since_s = None
+            self._set(False)
+            return
+        if self._good_since_s is None:
+            self._good_since_s = start
+        if not self.usable and t_s - self._good_since_s >= self.hold_s:
+            self._set(True)
+
+    def timed_out(self) -> None:
+        """No IMU sample for the timeout: unusable until the rate has held again."""
+        self._window_start_s = None
+        self._good_since_s = None
+        self._set(False)
+
+    def _set(self, usable: bool) -> None:
+        if usable is not self.usable:
+            self.usable = usable
+            self.changes += 1
+            log.info(
+                "IMU %s for dead reckoning (%.1f Hz, minimum %.0f Hz)",
+                "usable" if usable else "not usable",
+                self.rate_hz if self.rate_hz is not None else float("nan"),
+                self.min_rate_hz,
+            )
+
+
 class Navigators:
     """The primary navigator (the blend, if configured), the fallback, and the choice."""
 
-    def __init__(self, kind: str, blend: BlendConfig, imu_timeout_s: float) -> None:
-        """``kind`` is ``EngineConfig.navigator``; ``imu_timeout_s`` its IMU timeout."""
+    def __init__(
+        self,
+        kind: str,
+        blend: BlendConfig,
+        imu_timeout_s: float,
+        min_imu_rate_hz: float = 20.0,
+        imu_rate_hold_s: float = 5.0,
+    ) -> None:
+        """``kind`` is ``EngineConfig.navigator``; ``imu_timeout_s`` its IMU timeout,
+        ``min_imu_rate_hz`` and ``imu_rate_hold_s`` the IMU's usability (:class:`ImuRate`)."""
         self.fallback: Navigator = PassthroughNavigator(PassthroughConfig())
         self.primary: Navigator | None = None
         if kind == "blend":
@@ -52,6 +151,12 @@ class Navigators:
         """Fixes (and their gate flags) the fallback has not taken yet."""
         self._backlog_overflowed = False
         """The backlog dropped fixes: the fallback restarts from the fixes it holds."""
+        self.imu_rate = ImuRate(min_imu_rate_hz, imu_rate_hold_s)
+        """The IMU's measured rate and usability."""
+        self._restart_primary = False
+        """The IMU was unusable: the primary restarts from the next fix."""
+        self.switches = 0
+        """How many times the carrying navigator changed."""
 
     def all(self) -> list[Navigator]:
         """Every navigator kept up to date (the primary first)."""
@@ -63,6 +168,7 @@ class Navigators:
         if primary is None:
             return False
         primary.on_imu(sample)
+        self.imu_rate.on_sample(sample.t_s)
         self.last_imu_t_s = sample.t_s
         return True
 
@@ -75,17 +181,31 @@ class Navigators:
         return True
 
     def select(self, now_s: float | None) -> None:
-        """The blend carries the solution while it runs on a live IMU stream."""
+        """The blend carries the solution while it runs on a live, usable IMU stream."""
         primary = self.primary
+        rate = self.imu_rate
+        if (
+            primary is not None
+            and now_s is not None
+            and now_s - self.last_imu_t_s > self._imu_timeout_s
+            and self.last_imu_t_s > -math.inf
+            and rate.usable
+        ):
+            rate.timed_out()
+        if not rate.usable:
+            self._restart_primary = True
         live = (
             primary is not None
             and primary.initialised
+            and rate.usable
+            and not self._restart_primary
             and now_s is not None
             and now_s - self.last_imu_t_s <= self._imu_timeout_s
         )
         chosen = primary if live and primary is not None else self.fallback
         if chosen is not self.navigator:
             log.info("navigator: %s", type(chosen).__name__)
+            self.switches += 1
             if chosen is self.fallback:
                 self.sync_fallback()
             self.navigator = chosen
@@ -100,13 +220,35 @@ class Navigators:
         self.sync_fallback()
         update = self.fallback.on_gnss(meas, gate=gate)
         if primary is not None:
+            if self._restart_primary and self.imu_rate.usable:
+                # the IMU is usable again: what the blend integrated meanwhile is not
+                # trusted; it restarts from this fix and carries from the next selection
+                primary.reset()
+                self._restart_primary = False
             primary.on_gnss(meas, gate=gate and primary.initialised)
         return update
+
+    def force(self, meas: GnssMeasurement, rejected: GnssUpdate) -> GnssUpdate:
+        """Fuse ``meas``, which the carrying navigator's gate just rejected (``rejected``),
+        without the gate: the receiver's own evidence vouches for it, the prediction is
+        what is off. That evidence is horizontal (GPS_RAW_INT has no vertical velocity):
+        when the height alone fails its gate, ``rejected`` is returned unchanged."""
+        if not vertical_within_gate(rejected):
+            return rejected
+        primary = self.primary
+        if primary is not None and self.navigator is primary:
+            backlog = self.backlog
+            if backlog and backlog[-1][0] is meas:
+                backlog[-1] = (meas, False)  # the fallback takes it as the primary did
+            return primary.on_gnss(meas, gate=False)
+        return self.fallback.on_gnss(meas, gate=False)
 
     def reinitialise(self, meas: GnssMeasurement) -> None:
         """Restart every navigator from the fix ``meas`` (taken without a gate)."""
         self.backlog.clear()
         self._backlog_overflowed = False
+        if self.imu_rate.usable:
+            self._restart_primary = False
         for nav in self.all():
             nav.reset()
             nav.on_gnss(meas, gate=False)

@@ -3,8 +3,25 @@
 Detects loss (message timeout, no fix), downgrade (RTK fixed -> float -> DGPS/3D
 -> none, an accuracy jump, old RTK corrections: RTK_LOST, then RTK_BACK when RTK
 returns) and stale fixes (the receiver repeating or freezing its last corrected
-co-ordinates while the aircraft moves: the failure Grzegorzewski (2005) reports
-from flight trials, with errors up to 2 km at jet speed). It runs the mode machine
+co-ordinates while its own velocity says it moves: the failure Grzegorzewski (2005)
+reports from flight trials, with errors up to 2 km at jet speed). A receiver is
+judged by its own evidence (:mod:`companion.nav.receiver_checks`), never by the
+navigator's prediction it is meant to correct: a drifting prediction must not
+make a healthy receiver look frozen.
+
+Rejection is bounded: a receiver whose fixes the navigator has not taken (gate
+rejections, exclusion by the integrity monitor) for ``reset_after_rejection_s``
+while it is self-consistent, and that no other receiver contradicts, has the
+navigator reset to it (``reinitialise``), with an alert. When the receiver's
+consistent chain reaches back to the last fix the navigator took (it moved from
+an accepted fix exactly as its own velocity says), rejection convicts the
+prediction, not the receiver: the reset comes after ``reset_after_rejected_fixes``
+rejected fixes (a single outlier of the gate does not restart the navigator).
+Resets are alerted at most once per ``reset_alert_interval_s`` (the next alert
+counts those in between). Compare ArduPilot EKF3
+(``AP_NavEKF3_PosVelFusion.cpp``: the innovation gate, then after a timeout the
+position reset to GNSS) and PX4 EKF2 (GNSS quality checks, then a reset when
+fusion has timed out). It runs the mode machine
 
     INIT -> NORMAL <-> DEGRADED
               |  ^          |
@@ -37,6 +54,12 @@ import math
 from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
+from companion.nav.gnss import FALLBACK_H_STD_M, UERE_M, UNKNOWN_H_STD_M
+from companion.nav.receiver_checks import (
+    ReceiverCheckConfig,
+    ReceiverConsistency,
+    horizontal_offset_m,
+)
 from companion.ranges import check_ranges, ranged
 from companion.types import Alert, AlertCode, FixType, GnssFix, NavMode, Severity
 
@@ -64,11 +87,13 @@ class OutageConfig:
     """After this many consecutive gate rejections while reacquiring, the navigator is
     re-initialised from GNSS (its prediction, not the fixes, is then what is wrong)."""
     stale_min_speed_mps: float = 1.0
-    """Repeated co-ordinates are legitimate when parked: staleness is judged above this speed."""
+    """Repeated co-ordinates are legitimate when parked: staleness is judged above this speed
+    (the receiver's own ground speed)."""
     stale_repeats: int = ranged(2, ge=1)
     """Bit-identical consecutive positions (while moving) that make a fix stale."""
     stale_motion_ratio: float = ranged(0.2, gt=0.0, lt=1.0)
-    """A fix that moved less than this fraction of the navigator's predicted motion ..."""
+    """A fix that moved less than this fraction of the distance its own reported speed
+    covers ..."""
     stale_window_s: float = ranged(1.0, gt=0.0, finite=False)
     """... over at least this long is frozen (stale) even if not bit-identical."""
     accuracy_jump_ratio: float = ranged(4.0, gt=1.0, finite=False)
@@ -77,6 +102,28 @@ class OutageConfig:
     """RTK / DGPS corrections older than this (GPS2_RAW dgps_age) are treated as lost."""
     downgrade_memory_s: float = ranged(600.0, gt=0.0, finite=False)
     """The best fix type seen within this window is what 'not degraded' means."""
+    reset_after_rejection_s: float = ranged(3.0, gt=0.0, finite=False)
+    """A receiver the navigator has rejected (gate, exclusion) for this long while it is
+    self-consistent (:mod:`companion.nav.receiver_checks`) and no other receiver
+    contradicts it: the navigator is reset to its fix (an innovation alone never keeps
+    a receiver out longer). A few fix intervals beyond the gate's own false alarms;
+    shorter than EKF3's 7-10 s GPS retry time, because the blend on a MEMS IMU drifts
+    metres in seconds."""
+    min_satellites: int = ranged(6, ge=0)
+    """A receiver reporting fewer satellites is not self-consistent (PX4 EKF2: 6)."""
+    max_hdop: float = ranged(4.0, gt=0.0, finite=False)
+    """A receiver reporting a larger HDOP is not self-consistent (looser than PX4's
+    pre-flight PDOP 2.5: this re-admits a receiver in flight, it does not arm)."""
+    reset_after_rejected_fixes: int = ranged(2, ge=1)
+    """... or after this many rejected fixes when the receiver's consistent chain reaches
+    back to the last fix the navigator took (it moved from an accepted fix as its own
+    velocity says: the prediction is what is off)."""
+    reset_alert_interval_s: float = ranged(60.0, ge=0.0, finite=False)
+    """At most one alert per this interval for the resets to a receiver (the next one
+    says how many there were since)."""
+    contradiction_sigmas: float = ranged(5.0, gt=0.0)
+    """Another self-consistent receiver further than this many combined 1-sigmas from a
+    fix contradicts it: no reset to it (the integrity monitor arbitrates)."""
 
     def __post_init__(self) -> None:
         check_ranges(self)
@@ -116,6 +163,18 @@ class _ReceiverState:
     """When this receiver's RTK_LOST was raised; None when RTK was not lost (RTK_BACK
     is raised only for a receiver that announced RTK_LOST)."""
     stale: bool = False
+    checks: ReceiverConsistency = field(default_factory=ReceiverConsistency)
+    """Its own consistency (quality, increments against its velocity)."""
+    last_fix: GnssFix | None = None
+    rejected_since_t_s: float | None = None
+    """When the navigator began rejecting it (None: its last fix was used)."""
+    last_used_t_s: float | None = None
+    """Time of its last fix the engine used."""
+    rejected_fixes: int = 0
+    """Its fixes rejected since the last used one."""
+    unvouched: bool = False
+    """One of those was rejected for what its own evidence does not cover (its height):
+    no early reset, only the bounded time's."""
 
 
 @dataclass(slots=True)
@@ -131,11 +190,18 @@ class OutageMonitor:
     _gated_rejects: int = 0
     _lost_reason: str = ""
     _degraded: bool = False
+    _checks: ReceiverCheckConfig = field(default_factory=ReceiverCheckConfig)
+    resets: int = 0
+    """Resets of the navigator to a rejected receiver (bounded rejection)."""
+    _reset_alerted_t_s: float = -math.inf
+    _resets_unalerted: int = 0
 
     # ------------------------------------------------------------------ per fix
 
-    def assess(self, fix: GnssFix, nav_speed_mps: float | None) -> FixAssessment:
-        """Judge one fix; ``nav_speed_mps`` is the navigator's ground speed (None if unknown)."""
+    def assess(self, fix: GnssFix, *, shown_wrong: bool = False) -> FixAssessment:
+        """Judge one fix by the receiver's own evidence (see the module docstring);
+        ``shown_wrong``: an independent source (another receiver, an inertial reference)
+        shows this receiver wrong, so a rejection of it is never ended by a reset."""
         cfg = self.config
         rx = self._receivers.get(fix.receiver_id)
         if rx is None:
@@ -149,7 +215,12 @@ class OutageMonitor:
             return FixAssessment(False, f"fix_type_{ftype}", True, False, tuple(alerts))
 
         pos = (fix.lat_rad, fix.lon_rad, fix.alt_msl_m)
-        stale_reason = self._stale_check(rx, fix, pos, nav_speed_mps)
+        if rx.last_t_s is not None and t <= rx.last_t_s and pos == rx.last_pos:
+            # the same fix again (same time, same co-ordinates): nothing new, no alert
+            return FixAssessment(False, "repeated", True, False, tuple(alerts))
+        rx.checks.on_fix(fix, self._check_config())
+        rx.last_fix = fix
+        stale_reason = self._stale_check(rx, fix, pos)
         rx.last_t_s = t
         rx.last_pos = pos
         if stale_reason:
@@ -173,18 +244,72 @@ class OutageMonitor:
         # fixes rejected since the outage, whether or not one has been fused since: when
         # GNSS returns and the prediction has drifted beyond the gate, no fix ever passes
         reinit = self._gated_rejects >= cfg.reacquire_max_rejects and self.mode in OUTAGE_MODES
+        why = f"prediction rejected {self._gated_rejects} fixes: reinit from GNSS"
+        if not reinit and not shown_wrong:
+            why = self._reset_reason(rx, fix)
+            reinit = bool(why)
         if not reinit and not alerts:
             return _USABLE  # the common verdict, shared (it is immutable)
         if reinit:
-            alerts.append(
-                Alert(
-                    t,
-                    AlertCode.FAULT,
-                    Severity.WARNING,
-                    f"prediction rejected {self._gated_rejects} fixes: reinit from GNSS",
-                )
-            )
+            alerts += self._reset_alert(t, why)
         return FixAssessment(True, "ok", not reinit, reinit, tuple(alerts))
+
+    def vouched(self, fix: GnssFix) -> bool:
+        """Does the receiver's own evidence vouch for ``fix``: self-consistent, with a
+        chain reaching back to its last used fix, and no other receiver contradicting?
+        (Then a failed innovation measures the navigator's error, not the receiver's.)"""
+        rx = self._receivers.get(fix.receiver_id)
+        if rx is None or rx.last_fix is not fix or rx.last_used_t_s is None:
+            return False
+        start = rx.checks.chain_start_t_s
+        return (
+            start is not None
+            and start <= rx.last_used_t_s
+            and rx.checks.consistent(fix.t_s, self._check_config())
+            and not self._contradicted(fix)
+        )
+
+    def rejected(self, fix: GnssFix) -> None:
+        """The engine did not use a usable fix of this receiver (excluded, or the gate
+        failed): the rejection clock runs from the first such fix."""
+        rx = self._receivers.get(fix.receiver_id)
+        if rx is None:
+            return
+        rx.rejected_fixes += 1
+        if rx.rejected_since_t_s is None:
+            rx.rejected_since_t_s = fix.t_s
+
+    def rejection_unvouched(self, receiver_id: int) -> None:
+        """The last rejection was for what the receiver's own evidence does not cover (its
+        height): no reset before ``reset_after_rejection_s``."""
+        rx = self._receivers.get(receiver_id)
+        if rx is not None:
+            rx.unvouched = True
+
+    def rejection_explained(self, receiver_id: int) -> None:
+        """The receiver is held out on independent evidence (another receiver, a
+        reference): its rejection clock stops; no reset is due to it."""
+        rx = self._receivers.get(receiver_id)
+        if rx is not None:
+            rx.rejected_since_t_s = None
+            rx.rejected_fixes = 0
+            rx.unvouched = False
+
+    def used(self, fix: GnssFix) -> None:
+        """The engine used this fix: the receiver's rejection clock stops."""
+        rx = self._receivers.get(fix.receiver_id)
+        if rx is not None:
+            rx.rejected_since_t_s = None
+            rx.rejected_fixes = 0
+            rx.unvouched = False
+            rx.last_used_t_s = fix.t_s
+
+    def rejected_for_s(self, receiver_id: int, t_s: float) -> float:
+        """How long the navigator has been rejecting this receiver at ``t_s`` (0: not)."""
+        rx = self._receivers.get(receiver_id)
+        if rx is None or rx.rejected_since_t_s is None:
+            return 0.0
+        return max(0.0, t_s - rx.rejected_since_t_s)
 
     def gate_result(self, t_s: float, fused: bool) -> list[Alert]:
         """The navigator's verdict on a usable fix; returns mode-change alerts."""
@@ -299,30 +424,103 @@ class OutageMonitor:
             return "no GNSS messages"
         return "no usable fix"
 
+    def _check_config(self) -> ReceiverCheckConfig:
+        cfg = self.config
+        checks = self._checks
+        if checks.min_satellites != cfg.min_satellites or checks.max_hdop != cfg.max_hdop:
+            checks = self._checks = ReceiverCheckConfig(
+                min_satellites=cfg.min_satellites, max_hdop=cfg.max_hdop
+            )
+        return checks
+
+    def _reset_alert(self, t_s: float, why: str) -> list[Alert]:
+        """Count a reset; its alert unless one was raised within the alert interval."""
+        self.resets += 1
+        log.warning("t=%.2f s: %s", t_s, why)
+        if t_s - self._reset_alerted_t_s < self.config.reset_alert_interval_s:
+            self._resets_unalerted += 1
+            return []
+        if self._resets_unalerted:
+            why += f" ({self._resets_unalerted} more since the last alert)"
+        self._reset_alerted_t_s = t_s
+        self._resets_unalerted = 0
+        return [Alert(t_s, AlertCode.FAULT, Severity.WARNING, why)]
+
+    def _reset_reason(self, rx: _ReceiverState, fix: GnssFix) -> str:
+        """Why the navigator must be reset to this fix now, or '' (module docstring)."""
+        since = rx.rejected_since_t_s
+        t = fix.t_s
+        cfg = self.config
+        if since is None or not rx.checks.consistent(t, self._check_config()):
+            return ""
+        start = rx.checks.chain_start_t_s
+        linked = start is not None and rx.last_used_t_s is not None and start <= rx.last_used_t_s
+        if linked and rx.rejected_fixes >= cfg.reset_after_rejected_fixes and not rx.unvouched:
+            why = f"rx{fix.receiver_id} moved as its velocity says since its last used fix"
+        elif t - since >= cfg.reset_after_rejection_s:
+            why = f"rx{fix.receiver_id} rejected {t - since:.1f} s but self-consistent"
+        else:
+            return ""
+        if self._contradicted(fix):
+            return ""
+        return why + ": navigator reset to it"
+
+    def _contradicted(self, fix: GnssFix) -> bool:
+        """Does another self-consistent receiver, at about the same time, put the aircraft
+        more than ``contradiction_sigmas`` combined 1-sigmas from this fix?"""
+        cfg = self.config
+        for rid, other in self._receivers.items():
+            ofix = other.last_fix
+            if rid == fix.receiver_id or ofix is None or other.stale:
+                continue
+            dt = fix.t_s - ofix.t_s
+            if abs(dt) > 0.5 or not other.checks.consistent(ofix.t_s, self._check_config()):
+                continue
+            dn, de = horizontal_offset_m(ofix, fix)
+            if ofix.vel_ne_mps is not None:
+                dn -= float(ofix.vel_ne_mps[0]) * dt
+                de -= float(ofix.vel_ne_mps[1]) * dt
+            sigma = math.hypot(_h_sigma_m(fix), _h_sigma_m(ofix))
+            if math.hypot(dn, de) > cfg.contradiction_sigmas * sigma:
+                return True
+        return False
+
     def _stale_check(
         self,
         rx: _ReceiverState,
         fix: GnssFix,
         pos: tuple[float, float, float],
-        nav_speed_mps: float | None,
     ) -> str:
         cfg = self.config
-        moving = nav_speed_mps is not None and nav_speed_mps > cfg.stale_min_speed_mps
+        # the receiver's own speed: a drifting prediction must not make it look frozen
+        speed_mps = fix.ground_speed_mps
+        moving = speed_mps > cfg.stale_min_speed_mps
         if rx.last_pos is not None and pos == rx.last_pos and moving:
             rx.repeats += 1
         else:
             rx.repeats = 0
         if rx.repeats > 0 and rx.repeats + 1 >= cfg.stale_repeats:
             return f"repeated position x{rx.repeats + 1}"
-        # frozen: far less motion than the navigator predicts over a window
-        if not moving or nav_speed_mps is None:
+        # frozen: far less motion than the receiver's own speed says, over a window
+        if not moving:
             rx.anchor_t_s, rx.anchor_pos, rx.moved_expected_m = fix.t_s, pos, 0.0
             return ""
-        if rx.anchor_t_s is None or rx.anchor_pos is None or rx.last_t_s is None:
+        if (
+            rx.anchor_t_s is None
+            or rx.anchor_pos is None
+            or rx.last_t_s is None
+            or fix.t_s - rx.last_t_s > self._check_config().max_increment_dt_s
+        ):
+            # (after a gap in the fixes the speed says nothing about the distance)
             rx.anchor_t_s, rx.anchor_pos, rx.moved_expected_m = fix.t_s, pos, 0.0
             return ""
-        rx.moved_expected_m += nav_speed_mps * max(0.0, fix.t_s - rx.last_t_s)
-        if fix.t_s - rx.anchor_t_s < cfg.stale_window_s:
+        rx.moved_expected_m += speed_mps * max(0.0, fix.t_s - rx.last_t_s)
+        # the window closes once the motion expected is beyond the receiver's own noise
+        # (a slow receiver's velocity noise must not make it look frozen)
+        if (
+            fix.t_s - rx.anchor_t_s < cfg.stale_window_s
+            or rx.moved_expected_m < self._check_config().chain_tol_m
+        ):
             return ""
         moved_m = _horizontal_distance_m(rx.anchor_pos, pos)
         expected_m = rx.moved_expected_m
@@ -360,6 +558,15 @@ class OutageMonitor:
         jump = fix.h_acc_m is not None and fix.h_acc_m > cfg.accuracy_jump_ratio * rx.best_hacc_m
         self._degraded = ftype < rx.best_type or jump or corrections_old
         return alerts
+
+
+def _h_sigma_m(fix: GnssFix) -> float:
+    """A fix's horizontal 1-sigma: reported, else HDOP x UERE, else by fix type (m)."""
+    if fix.h_acc_m is not None:
+        return fix.h_acc_m
+    if fix.hdop is not None:
+        return fix.hdop * UERE_M
+    return FALLBACK_H_STD_M.get(fix.fix_type, UNKNOWN_H_STD_M)
 
 
 def _horizontal_distance_m(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:

@@ -93,6 +93,25 @@ class FaultDetector:
         """True when ``receiver_id`` is currently excluded (do not fuse its fixes)."""
         return is_excluded(self._receivers, receiver_id, self.now_s)
 
+    def shown_wrong(self, receiver_id: int) -> bool:
+        """True while ``receiver_id`` is excluded on a separation test's evidence (another
+        receiver, a reference), not on its innovation alone."""
+        rx = self._receivers.get(receiver_id)
+        return rx is not None and self.now_s is not None and self.now_s < rx.shown_wrong_until_s
+
+    def pardon(self, receiver_id: int) -> None:
+        """Lift an exclusion: the engine reset the navigator to this receiver (rejected by
+        the innovation alone for too long while self-consistent), so the innovation that
+        excluded it measured the navigator's error, not the receiver's."""
+        rx = self._receivers.get(receiver_id)
+        if rx is None:
+            return
+        if self.now_s is not None and self.now_s < rx.excluded_until_s:
+            self.stats["pardoned"] += 1
+        rx.excluded_until_s = -math.inf
+        rx.alerted = False
+        rx.last_nis = 0.0
+
     @property
     def fault_detected(self) -> bool:
         """True while a fault is unresolved or any receiver is excluded."""
@@ -170,6 +189,8 @@ class FaultDetector:
             rx = self._receivers[rid] = ReceiverState()
         reasons: list[str] = []
         culprits: set[int] = set()
+        independent: set[int] = set()
+        # culprits blamed by a separation test: independent evidence, never pardoned
         unresolved = False
         attribution = self.attribution
 
@@ -204,6 +225,7 @@ class FaultDetector:
             if key[1].startswith(REF_PREFIX):
                 if rid in culprits or t < rx.excluded_until_s:
                     culprits.add(rid)  # already found faulty: it stays excluded
+                    independent.add(rid)
                 elif update is None and self._other_receivers(rid, t):
                     # the reference was anchored from the navigator, which fuses another
                     # receiver: it may carry that one's fault; a disagreement, unresolved
@@ -213,6 +235,7 @@ class FaultDetector:
                         attribution.episode_start_s = t
                 elif attribution.reference_trusted(key):
                     culprits.add(rid)
+                    independent.add(rid)
                 else:
                     self.stats["reference_untrusted"] += 1
                 continue
@@ -224,11 +247,14 @@ class FaultDetector:
                 unresolved = True
             else:
                 culprits.add(culprit)
+                independent.add(culprit)
 
         rx.last_meas = meas
         outputs: list[Output] = []
         for cid in sorted(culprits):
             outputs += self._exclude_receiver(cid, t, reasons)
+            if cid in independent:
+                self._receivers[cid].shown_wrong_until_s = t + self.config.recovery_s
         if unresolved:
             self.stats["unresolved"] += 1
             self._unresolved_until_s = t + self.config.recovery_s

@@ -25,6 +25,9 @@ class ReceiverState:
     """The navigator's last NIS for this receiver, per degree of freedom."""
     last_nis_t_s: float = -math.inf
     """Time of that NIS, s."""
+    shown_wrong_until_s: float = -math.inf
+    """A separation test (against another receiver or a reference) blamed it: until this
+    time its exclusion rests on independent evidence, not on the innovation alone."""
 
 
 def is_excluded(
