@@ -22,7 +22,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS, Decoder
 from companion.mavlink.framing import FrameParser
 from companion.mavlink.messages import FastDecoder, LightMessage
-from companion.mavlink.tlog import TlogReader
+from companion.mavlink.tlog import TlogError, TlogReader
 from tests.mavlink._util import Packer, attitude, heartbeat, raw_imu
 
 FIXTURES = Path(__file__).resolve().parents[2] / "sitl_fixtures"
@@ -245,7 +245,24 @@ def test_corrupted_tlog_gives_the_same_records_light_or_not(
     path = tmp_path / "f.tlog"
     path.write_bytes(_damage(data, TLOG))
     light_reader, reader = TlogReader(path, light_ids=LIGHT_MESSAGE_IDS), TlogReader(path)
-    got = [(t, _view(m)) for t, m in light_reader]
-    want = [(t, _view(m)) for t, m in reader]
+    got, want = _records_or_refusal(light_reader), _records_or_refusal(reader)
     assert got == want
     assert light_reader.stats == reader.stats
+
+
+def _records_or_refusal(reader: TlogReader) -> list[tuple[float, object]] | str:
+    """The records, or the refusal of a damaged file that now starts like another format
+    (a PDF's or a gzip's magic number): both readers must agree either way."""
+    try:
+        return [(t, _view(m)) for t, m in reader]
+    except TlogError as exc:
+        return f"refused: {exc}"
+
+
+def test_a_damaged_tlog_that_starts_like_a_pdf_is_refused_by_both(tmp_path: Path) -> None:
+    path = tmp_path / "f.tlog"
+    path.write_bytes(b"%PDF" + TLOG[4:])
+    light_reader, reader = TlogReader(path, light_ids=LIGHT_MESSAGE_IDS), TlogReader(path)
+    refused = _records_or_refusal(reader)
+    assert isinstance(refused, str) and "PDF" in refused
+    assert _records_or_refusal(light_reader) == refused
