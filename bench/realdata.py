@@ -87,6 +87,33 @@ def print_table(rows: list[dict[str, str]]) -> None:
         print("  ".join(row.get(c, "-").ljust(widths[c]) for c in columns))
 
 
+def walk_table_row() -> dict[str, str]:
+    """The walk_0827 recording (bench/walk_0827.py: no ATTITUDE, 15 s outages, the RTK
+    solution as reference) as one row, with the device's measurement floors."""
+    import walk_0827  # bench/ is the script's folder, on sys.path
+
+    row = walk_0827.walk_row()
+    name = "gnss_imu/walk_0827 (handheld floors)"
+    if row is None:
+        return {"flight": name, "wrong>25m": f"skipped: no recording at {walk_0827.DATA_DIR}"}
+    close_ok = row["close_h_m"] <= walk_0827.TARGET_H_M and row["close_v_m"] <= (
+        walk_0827.TARGET_V_M
+    )
+    cover = min(row["cov95_h"], row["cov95_v"])
+    cells = {
+        "flight": name,
+        "cover95": f"{100 * cover:.0f}% {'PASS' if cover >= 0.95 else 'FAIL'}",
+        "walk closure H/V": (
+            f"{row['close_h_m']:.2f}/{row['close_v_m']:.2f} m {'PASS' if close_ok else 'FAIL'}"
+        ),
+    }
+    unused_ok = row["fixes_unused"] == 0
+    cells["walk unused fixes"] = f"{row['fixes_unused']} {'PASS' if unused_ok else 'FAIL'}"
+    passed = close_ok and cover >= 0.95 and unused_ok
+    cells["all"] = "PASS" if passed else "FAIL"
+    return cells
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the full results here")
@@ -127,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         row["all"] = "PASS" if run["result"].passed else "FAIL"
         rows.append(row)
     # other data sets' rows (dicts of column -> cell) are appended here
+    if not args.only or args.only in "walk_0827":
+        rows.append(walk_table_row())
     print_table(rows)
     print()
     print(

@@ -167,8 +167,9 @@ TEXT_WINDOW_S = 60.0
 TEXT_MAX_PER_WINDOW = 6
 PARKED_SPEED_MPS = 0.5
 PARKED_MIN_S = 10.0
-LOSS_ALERT_CODES: frozenset[str] = frozenset({"GNSS_LOST", "BRIDGING"})
-"""Alerts that say GNSS is gone (docs/mavlink.md): GNSS_LOST, raised with BRIDGING."""
+LOSS_ALERT_CODES: frozenset[str] = frozenset({"GNSS_LOST", "BRIDGING", "NO_GNSS", "NO_DATA"})
+"""Alerts that say GNSS is gone (docs/mavlink.md): GNSS_LOST, raised with BRIDGING; NO_GNSS
+(no fix has started the navigation); NO_DATA (every stream stopped, GNSS with them)."""
 BACK_ALERT_CODES: frozenset[str] = frozenset({"GNSS_BACK"})
 FLAP_CODES: frozenset[str] = frozenset({"INTEGRITY", "CAT"})
 """Codes whose repetition while parked is phase or integrity flapping."""
