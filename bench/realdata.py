@@ -19,6 +19,7 @@ Progress goes to stderr.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import logging
 import sys
@@ -90,8 +91,14 @@ def print_table(rows: list[dict[str, str]]) -> None:
 def walk_table_row() -> dict[str, str]:
     """The walk_0827 recording (bench/walk_0827.py: no ATTITUDE, 15 s outages, the RTK
     solution as reference) as one row, with the device's measurement floors."""
-    import walk_0827  # bench/ is the script's folder, on sys.path
-
+    spec = importlib.util.spec_from_file_location(
+        "walk_0827", Path(__file__).with_name("walk_0827.py")
+    )
+    if spec is None or spec.loader is None:
+        raise ImportError("bench/walk_0827.py not found beside bench/realdata.py")
+    walk_0827 = importlib.util.module_from_spec(spec)
+    sys.modules["walk_0827"] = walk_0827  # its dataclasses look their module up
+    spec.loader.exec_module(walk_0827)
     row = walk_0827.walk_row()
     name = "gnss_imu/walk_0827 (handheld floors)"
     if row is None:
@@ -154,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
         row["all"] = "PASS" if run["result"].passed else "FAIL"
         rows.append(row)
     # other data sets' rows (dicts of column -> cell) are appended here
-    if not args.only or args.only in "walk_0827":
+    # the walk beside the real flights folder (not with another --flights folder)
+    if args.flights == FLIGHTS_DIR and (not args.only or args.only in "walk_0827"):
         rows.append(walk_table_row())
     print_table(rows)
     print()
