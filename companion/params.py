@@ -322,6 +322,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("OUT_MIN_SATS", "outage.min_satellites"),
     ("OUT_MAX_HDOP", "outage.max_hdop"),
     ("OUT_CONTRA_SIG", "outage.contradiction_sigmas"),
+    ("OUT_TIMEOUT_NFIX", "outage.timeout_fix_intervals"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

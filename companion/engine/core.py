@@ -218,7 +218,7 @@ class Engine:
             if silence_s is not None:
                 resumed = self._after_silence(t_s, silence_s)
         elif kind is RebootEvent and watch.silent:
-            text = "autopilot rebooted: navigation restarts from the next fix"
+            text = "autopilot rebooted: restart from next fix"
             resumed = [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []
@@ -262,7 +262,7 @@ class Engine:
         last = outage.last_fused_t_s
         if last is not None:
             if outage.mode in (NavMode.NORMAL, NavMode.DEGRADED):
-                due = min(due, last + outage.config.gnss_timeout_s + DUE_EPS_S)
+                due = min(due, last + outage.timeout_s + DUE_EPS_S)
             elif outage.mode in (NavMode.BRIDGING, NavMode.REACQUIRING):
                 due = min(due, last + outage.config.max_bridge_s + DUE_EPS_S)
         return due
@@ -287,7 +287,7 @@ class Engine:
         self.stats.silences += 1
         self._restart_navigation()
         self.watch.restarted(t_s)
-        text = f"after {silence_s:.1f} s: navigation restarts from the next fix"
+        text = f"after {silence_s:.1f} s: restart from next fix"
         return [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
 
     def _account(self, outputs: list[Output]) -> None:
@@ -468,9 +468,8 @@ class Engine:
         if fix.receiver_id == primary:
             return True
         last_primary = self._rx_last_usable_t_s.get(primary, -math.inf)
-        primary_down = (
-            fix.t_s - last_primary > self._outage_config.gnss_timeout_s
-            or self.integrity.exclude(primary)
+        primary_down = fix.t_s - last_primary > self.outage.timeout_s or self.integrity.exclude(
+            primary
         )
         return primary_down
 

@@ -110,7 +110,7 @@ class StreamWatch:
         last = self.last_data_t_s
         if not self.silent and last is not None and t_s - last >= self.silence_timeout_s:
             self.silent = True
-            text = f"no IMU, attitude or GNSS from the autopilot for {t_s - last:.1f} s"
+            text = f"no IMU, attitude, GNSS for {t_s - last:.1f} s"
             alerts.append(Alert(t_s, AlertCode.NO_DATA, Severity.CRITICAL, text))
         if t_s >= self.no_gnss_due_s and self._wait_start_t_s is not None:
             waited = t_s - self._wait_start_t_s

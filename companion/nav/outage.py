@@ -51,6 +51,8 @@ from __future__ import annotations
 
 import logging
 import math
+import statistics
+from collections import deque
 from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
@@ -77,6 +79,11 @@ class OutageConfig:
 
     gnss_timeout_s: float = ranged(1.0, gt=0.0, finite=False)
     """No usable fix for this long -> GNSS_LOST and BRIDGING. Five missed epochs at 5 Hz."""
+    timeout_fix_intervals: float = ranged(1.5, ge=1.0)
+    """A receiver slower than ``gnss_timeout_s`` allows (a telemetry link's 1 Hz) is late
+    only after this many of its own fix intervals (the median of the last
+    :data:`FIX_INTERVALS_KEPT` between fused fixes): a fix that is merely not due yet is no
+    outage."""
     min_fix_type: int = ranged(int(FixType.FIX_3D), ge=0, le=int(FixType.PPP))
     """Fixes below this type are not usable (2-D fixes carry no height)."""
     max_bridge_s: float = ranged(120.0, gt=0.0, finite=False)
@@ -177,6 +184,10 @@ class _ReceiverState:
     no early reset, only the bounded time's."""
 
 
+FIX_INTERVALS_KEPT = 20
+"""Intervals between fused fixes whose median sets a slow receiver's timeout."""
+
+
 @dataclass(slots=True)
 class OutageMonitor:
     """The mode machine of GNSS availability (see the module docstring)."""
@@ -193,6 +204,8 @@ class OutageMonitor:
     _checks: ReceiverCheckConfig = field(default_factory=ReceiverCheckConfig)
     resets: int = 0
     """Resets of the navigator to a rejected receiver (bounded rejection)."""
+    _median_fix_interval_s: float = 0.0
+    _fix_intervals_s: deque[float] = field(default_factory=lambda: deque(maxlen=FIX_INTERVALS_KEPT))
     _reset_alerted_t_s: float = -math.inf
     _resets_unalerted: int = 0
 
@@ -319,6 +332,7 @@ class OutageMonitor:
                 self._gated_rejects += 1
                 self._gated_ok = 0
             return alerts
+        self._fix_interval(t_s)
         self.last_fused_t_s = t_s
         if self.mode is NavMode.INIT:
             self._set_mode(self._good_mode())
@@ -339,6 +353,22 @@ class OutageMonitor:
             self.outage_start_t_s = None
             self._set_mode(self._good_mode())
         return alerts
+
+    def _fix_interval(self, t_s: float) -> None:
+        """Keep the interval since the last fused fix (not one spanning an outage) and
+        the timeout it implies."""
+        last = self.last_fused_t_s
+        if last is None or t_s <= last or self.mode not in (NavMode.NORMAL, NavMode.DEGRADED):
+            return
+        self._fix_intervals_s.append(t_s - last)
+        self._median_fix_interval_s = statistics.median(self._fix_intervals_s)
+
+    @property
+    def timeout_s(self) -> float:
+        """The GNSS timeout in force: ``gnss_timeout_s``, or longer for a slow receiver
+        (``timeout_fix_intervals`` of its median fix interval)."""
+        cfg = self.config
+        return max(cfg.gnss_timeout_s, cfg.timeout_fix_intervals * self._median_fix_interval_s)
 
     def reinitialised(self, t_s: float) -> list[Alert]:
         """The engine re-initialised the navigator from a fix; GNSS_BACK if it ends an outage."""
@@ -363,7 +393,7 @@ class OutageMonitor:
             return alerts
         silent_s = t_s - self.last_fused_t_s
         # the time tests first: they are cheaper and almost always false
-        if silent_s > cfg.gnss_timeout_s and self.mode in (NavMode.NORMAL, NavMode.DEGRADED):
+        if silent_s > self.timeout_s and self.mode in (NavMode.NORMAL, NavMode.DEGRADED):
             stale = any(r.stale for r in self._receivers.values())
             reason = "stale fixes" if stale else self._silence_reason(t_s)
             self.outage_start_t_s = self.last_fused_t_s
@@ -397,6 +427,8 @@ class OutageMonitor:
         self.last_fused_t_s = None
         self.outage_start_t_s = None
         self._receivers.clear()
+        self._fix_intervals_s.clear()
+        self._median_fix_interval_s = 0.0
         self._gated_ok = 0
         self._gated_rejects = 0
         self._degraded = False
@@ -420,7 +452,7 @@ class OutageMonitor:
         if not self._receivers:
             return "no fix"
         newest = max((r.last_t_s or -math.inf) for r in self._receivers.values())
-        if t_s - newest > self.config.gnss_timeout_s:
+        if t_s - newest > self.timeout_s:
             return "no GNSS messages"
         return "no usable fix"
 

@@ -56,6 +56,24 @@ def test_timeout_reacquire_and_back_after_n_gated_fixes():
     assert mon.mode is NavMode.NORMAL
 
 
+def test_a_slow_receiver_is_late_after_its_own_intervals_not_the_fixed_timeout():
+    """A 1 Hz receiver (a telemetry link): 1.2 s without a fix is no outage (1.5 of its
+    intervals), 1.6 s is; a 10 Hz receiver keeps the configured 1 s."""
+    mon = OutageMonitor()
+    for t in range(6):  # fixes at 0..5 s, 1 s apart
+        assert mon.assess(fix(float(t))).usable
+        mon.gate_result(float(t), True)
+    assert mon.timeout_s == pytest.approx(1.5)
+    assert mon.tick(6.2) == []
+    assert codes(mon.tick(6.6)) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    fast = OutageMonitor()
+    start(fast)
+    assert fast.timeout_s == pytest.approx(1.0)
+    assert codes(fast.tick(2.95)) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    fast.reset()
+    assert fast.timeout_s == pytest.approx(1.0)
+
+
 def test_rejected_fixes_while_reacquiring_lead_to_reinitialisation():
     cfg = OutageConfig(reacquire_max_rejects=4)
     mon = OutageMonitor(cfg)
