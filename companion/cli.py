@@ -85,6 +85,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    if (args.truth is None) == (args.against_input is None):
+        raise ValueError("give --truth TRUTH.csv or --against-input IN.tlog (one of them)")
+    if args.against_input is not None:
+        return _evaluate_against_input(args)
     from companion.evaluate import evaluate
 
     if args.plot is not None:  # before the work: a missing extra is one line, not a traceback
@@ -101,6 +105,20 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
         plot_evaluation(evaluation, args.plot)
         print(f"plot: {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _evaluate_against_input(args: argparse.Namespace) -> int:
+    from companion.evaluate.against_input import evaluate_against_input
+
+    if args.plot is not None or args.events is not None:
+        raise ValueError("--plot and --events go with --truth, not --against-input")
+    config = _load_config(args)
+    result = evaluate_against_input(args.output_tlog, args.against_input, config.decoder)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2, sort_keys=True))
+    else:
+        print(result.to_text())
     return 0
 
 
@@ -179,9 +197,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
     p.set_defaults(func=_cmd_replay)
 
-    p = sub.add_parser("evaluate", help="score a replay output against truth")
+    p = sub.add_parser(
+        "evaluate", help="score a replay output against truth or against its own input"
+    )
     p.add_argument("output_tlog", type=Path, help="the replay's output .tlog")
-    p.add_argument("--truth", type=Path, required=True, help="truth CSV from the simulator")
+    p.add_argument("--truth", type=Path, help="truth CSV from the simulator")
+    p.add_argument(
+        "--against-input",
+        type=Path,
+        help="the replayed .tlog: score against the receiver's own fixes (no truth)",
+    )
+    p.add_argument("--config", type=Path, help="with --against-input: the replay's configuration")
+    p.add_argument("--grade", help=GRADE_HELP)
     p.add_argument("--events", type=Path, help="event sidecar JSON (default: beside the truth)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--plot", type=Path, help="draw the track and errors to this PNG")

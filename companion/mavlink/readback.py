@@ -9,8 +9,11 @@ them:
 GLOBAL_POSITION_INT         :class:`PublishedPosition` (``t_s`` =
                             ``time_boot_ms`` / 1000, the solution's time of
                             validity; yaw in [0, 2 pi) or None)
-GPS_INPUT                   :class:`PublishedFix` (fix type; 1-sigma accuracies,
+GPS_INPUT                   :class:`PublishedFix` (time of validity ``time_usec``,
+                            fix type, position, velocity; 1-sigma accuracies,
                             None where flagged ignored or not > 0)
+GLOBAL_POSITION_SENSOR      :class:`PublishedSensorFix` (time of validity, healthy
+                            flag, position, 1-sigma accuracies)
 NAMED_VALUE_FLOAT           :class:`companion.types.NamedValue`
 STATUSTEXT                  :class:`PublishedText` (one chunk; :class:`TextJoiner`
                             joins multi-chunk texts, :func:`parse_alert` splits
@@ -18,12 +21,12 @@ STATUSTEXT                  :class:`PublishedText` (one chunk; :class:`TextJoine
 HEARTBEAT                   :class:`PublishedHeartbeat`
 ==========================  ===================================================
 
-Anything else (COMMAND_ACK, stream requests, GLOBAL_POSITION_SENSOR ...) reads
-as None.
+Anything else (COMMAND_ACK, stream requests ...) reads as None.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +34,8 @@ from typing import Any
 from companion.mavlink import units
 from companion.mavlink.ids import (
     ALERT_PREFIX,
+    GLOBAL_POSITION_PRIMARY,
+    GLOBAL_POSITION_UNHEALTHY,
     GPS_INPUT_IGNORE_FLAG_HORIZONTAL_ACCURACY,
     GPS_INPUT_IGNORE_FLAG_VERTICAL_ACCURACY,
     MAV_COMP_ID_ONBOARD_COMPUTER,
@@ -55,9 +60,30 @@ class PublishedPosition:
 
 @dataclass(frozen=True, slots=True)
 class PublishedFix:
-    """A published GPS_INPUT: the fix type and the 1-sigma accuracies (m)."""
+    """A published GPS_INPUT: the fix type and the 1-sigma accuracies (m), and the
+    solution it carries, valid at autopilot time ``t_s`` (``time_usec``)."""
 
     fix_type: int
+    h_acc_m: float | None
+    v_acc_m: float | None
+    t_s: float = math.nan
+    lat_rad: float = math.nan
+    lon_rad: float = math.nan
+    alt_msl_m: float = math.nan
+    vel_ned_mps: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True, slots=True)
+class PublishedSensorFix:
+    """A published GLOBAL_POSITION_SENSOR (PX4): the solution valid at autopilot time
+    ``t_s``, ``healthy`` when flagged PRIMARY and not UNHEALTHY (the encoder flags a fix
+    below 3-D UNHEALTHY), 1-sigma accuracies (m, None when not > 0)."""
+
+    t_s: float
+    healthy: bool
+    lat_rad: float
+    lon_rad: float
+    alt_msl_m: float
     h_acc_m: float | None
     v_acc_m: float | None
 
@@ -78,7 +104,14 @@ class PublishedHeartbeat:
     system_status: int
 
 
-Published = PublishedPosition | PublishedFix | PublishedText | PublishedHeartbeat | NamedValue
+Published = (
+    PublishedPosition
+    | PublishedFix
+    | PublishedSensorFix
+    | PublishedText
+    | PublishedHeartbeat
+    | NamedValue
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,6 +178,24 @@ def read_message(msg: Any) -> Published | None:
             fix_type=int(msg.fix_type),
             h_acc_m=h if h_ok else None,
             v_acc_m=v if v_ok else None,
+            t_s=msg.time_usec / units.US_PER_S,
+            lat_rad=msg.lat / units.DEGE7_PER_RAD,
+            lon_rad=msg.lon / units.DEGE7_PER_RAD,
+            alt_msl_m=float(msg.alt),
+            vel_ned_mps=(float(msg.vn), float(msg.ve), float(msg.vd)),
+        )
+    if kind == "GLOBAL_POSITION_SENSOR":
+        flags = int(msg.flags)
+        h = float(msg.eph)
+        v = float(msg.epv)
+        return PublishedSensorFix(
+            t_s=msg.time_usec / units.US_PER_S,
+            healthy=bool(flags & GLOBAL_POSITION_PRIMARY) and not flags & GLOBAL_POSITION_UNHEALTHY,
+            lat_rad=msg.lat / units.DEGE7_PER_RAD,
+            lon_rad=msg.lon / units.DEGE7_PER_RAD,
+            alt_msl_m=float(msg.alt),
+            h_acc_m=h if h > 0.0 else None,
+            v_acc_m=v if v > 0.0 else None,
         )
     if kind == "STATUSTEXT":
         return PublishedText(

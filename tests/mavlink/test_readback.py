@@ -13,13 +13,14 @@ from companion.mavlink.readback import (
     PublishedFix,
     PublishedHeartbeat,
     PublishedPosition,
+    PublishedSensorFix,
     PublishedText,
     TextJoiner,
     from_service,
     parse_alert,
     read_message,
 )
-from companion.types import Alert, AlertCode, AutopilotFlavour, NamedValue, Severity
+from companion.types import Alert, AlertCode, AutopilotFlavour, FixType, NamedValue, Severity
 from tests.mavlink.test_encode import solution
 
 
@@ -44,6 +45,22 @@ def test_solution_reads_back() -> None:
     assert fix.fix_type == int(sol.fix_type)
     assert fix.h_acc_m == pytest.approx(sol.h_acc_m, rel=1e-6)
     assert fix.v_acc_m == pytest.approx(sol.v_acc_m, rel=1e-6)
+    assert fix.t_s == pytest.approx(sol.t_s, abs=1e-6)
+    assert (fix.lat_rad, fix.lon_rad) == (pos.lat_rad, pos.lon_rad)
+    assert fix.alt_msl_m == pytest.approx(sol.alt_msl_m, abs=1e-4)
+    assert fix.vel_ned_mps == pytest.approx(tuple(sol.vel_ned_mps), abs=1e-5)
+
+
+def test_px4_solution_reads_back() -> None:
+    enc = Encoder()
+    for fix_type, healthy in ((FixType.FIX_3D, True), (FixType.FIX_2D, False)):
+        frames = [f for _, f in enc.encode_frames(solution(fix=fix_type), AutopilotFlavour.PX4)]
+        pos, sensor = _published(frames)
+        assert isinstance(sensor, PublishedSensorFix) and sensor.healthy is healthy
+        assert sensor.t_s == pytest.approx(pos.t_s, abs=1e-6)
+        assert (sensor.lat_rad, sensor.lon_rad) == (pos.lat_rad, pos.lon_rad)
+        assert sensor.h_acc_m == pytest.approx(0.8, rel=1e-6)
+        assert sensor.v_acc_m == pytest.approx(1.5, rel=1e-6)
 
 
 def test_unknown_yaw_alert_named_value_heartbeat() -> None:

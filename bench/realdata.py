@@ -1,0 +1,170 @@
+"""Every real flight replayed through the service and scored against its own input.
+
+For each flight folder of ``../shared/realdata/flights/`` (relative to the project root;
+README there): the converted ``<folder>.tlog`` is replayed with the default configuration
+(:func:`companion.replay.replay`, the code path of ``companion replay``), and the output
+is scored with :func:`companion.evaluate.against_input.evaluate_against_input` (the code
+path of ``companion evaluate OUT --against-input IN``; rules in that module). Prints one
+table, a row per flight and a column per acceptance figure with its PASS/FAIL mark
+("-": not applicable), then a row per GNSS gap. A folder without its tlog, or the whole
+data folder absent, is skipped with the reason.
+
+Other rows (another data set scored its own way) join the table as dicts of
+column -> cell: append them to the list :func:`main` passes to :func:`print_table`.
+
+Run: ``python bench/realdata.py [--json OUT.json] [--keep DIR] [--only NAME]``.
+Progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from companion.config import load_config  # noqa: E402
+from companion.evaluate.against_input import evaluate_against_input  # noqa: E402
+from companion.evaluate.against_input_report import GAP_HEADER, gap_line  # noqa: E402
+from companion.replay import replay  # noqa: E402
+
+FLIGHTS_DIR = ROOT.parent / "shared" / "realdata" / "flights"
+BAR_WIDTH = 30
+
+
+def progress(done_bytes: int, total_bytes: int, label: str, t0: float) -> None:
+    """A one-line progress bar on stderr (by input bytes), elapsed time."""
+    frac = done_bytes / total_bytes if total_bytes else 1.0
+    filled = int(round(BAR_WIDTH * frac))
+    bar = "#" * filled + "." * (BAR_WIDTH - filled)
+    line = f"\r[{bar}] {100 * frac:3.0f}% {time.perf_counter() - t0:6.1f} s  {label:<45.45}"
+    print(line, end="", file=sys.stderr, flush=True)
+
+
+def _size(path: Path) -> int:
+    return path.stat().st_size if path.is_file() else 0
+
+
+def run_flight(folder: Path, out_dir: Path) -> dict[str, Any]:
+    """Replay and score one flight folder: its table row, gaps and JSON."""
+    tlog = folder / f"{folder.name}.tlog"
+    if not tlog.is_file():
+        return {"flight": folder.name, "skipped": f"no {tlog.name} in the folder"}
+    config = load_config(None)
+    out = out_dir / f"{folder.name}.out.tlog"
+    t0 = time.perf_counter()
+    summary = replay(tlog, out, config)
+    t1 = time.perf_counter()
+    result = evaluate_against_input(out, tlog, config.decoder)
+    t2 = time.perf_counter()
+    return {
+        "flight": folder.name,
+        "result": result,
+        "replay_s": t1 - t0,
+        "evaluate_s": t2 - t1,
+        "log_s": summary.log_duration_s,
+    }
+
+
+def print_table(rows: list[dict[str, str]]) -> None:
+    """One table: the union of the rows' columns, in first-seen order; '-' where absent."""
+    columns: list[str] = []
+    for row in rows:
+        for key in row:
+            if key not in columns:
+                columns.append(key)
+    widths = {c: max(len(c), *(len(r.get(c, "-")) for r in rows)) for c in columns}
+    print("  ".join(c.ljust(widths[c]) for c in columns))
+    print("  ".join("-" * widths[c] for c in columns))
+    for row in rows:
+        print("  ".join(row.get(c, "-").ljust(widths[c]) for c in columns))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", type=Path, help="write the full results here")
+    parser.add_argument("--keep", type=Path, help="keep the replay outputs in this folder")
+    parser.add_argument("--only", help="only the flight folders whose name contains this")
+    parser.add_argument("--flights", type=Path, default=FLIGHTS_DIR, help="flights folder")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.ERROR, stream=sys.stderr)
+    logging.getLogger("companion").setLevel(logging.ERROR)
+    if not args.flights.is_dir():
+        print(f"skipped: no real data at {args.flights} (a clone without ../shared/realdata)")
+        return 0
+    folders = sorted(p for p in args.flights.iterdir() if p.is_dir())
+    if args.only:
+        folders = [p for p in folders if args.only in p.name]
+    sizes = {p: _size(p / f"{p.name}.tlog") for p in folders}
+    total = sum(sizes.values())
+    t0 = time.perf_counter()
+    done = 0
+    runs: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        out_dir = args.keep if args.keep is not None else Path(tmp)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for folder in folders:
+            progress(done, total, folder.name, t0)
+            runs.append(run_flight(folder, out_dir))
+            done += sizes[folder]
+        progress(done, total, "done", t0)
+    wall = time.perf_counter() - t0
+    print(file=sys.stderr)
+
+    rows: list[dict[str, str]] = []
+    for run in runs:
+        if "skipped" in run:
+            rows.append({"flight": run["flight"], "wrong>25m": f"skipped: {run['skipped']}"})
+            continue
+        row = {"flight": run["flight"], **run["result"].row()}
+        row["all"] = "PASS" if run["result"].passed else "FAIL"
+        rows.append(row)
+    # other data sets' rows (dicts of column -> cell) are appended here
+    print_table(rows)
+    print()
+    print(
+        "GNSS gaps >= 3 s (autopilot time s; horizontal m; ratio = closure / best of hold and"
+        " cv; ratio and 99 % judged only where the IMU runs >= 20 Hz)"
+    )
+    print(f"  {'flight':<38}" + GAP_HEADER[2:])
+    for run in runs:
+        for g in getattr(run.get("result"), "gaps", ()):
+            print(f"  {run['flight']:<38}" + gap_line(g)[2:])
+    n_scored = sum("result" in r for r in runs)
+    print()
+    print(
+        f"{n_scored} flight(s) replayed and scored in {wall:.1f} s "
+        f"(replay {sum(r.get('replay_s', 0.0) for r in runs):.1f} s, "
+        f"evaluate {sum(r.get('evaluate_s', 0.0) for r in runs):.1f} s)"
+    )
+    if args.json is not None:
+        doc = [
+            {
+                "flight": r["flight"],
+                **(
+                    {"skipped": r["skipped"]}
+                    if "skipped" in r
+                    else {
+                        "replay_s": r["replay_s"],
+                        "evaluate_s": r["evaluate_s"],
+                        "log_s": r["log_s"],
+                        **r["result"].to_dict(),
+                    }
+                ),
+            }
+            for r in runs
+        ]
+        args.json.write_text(json.dumps(doc, indent=2, sort_keys=True))
+        print(f"json: {args.json}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
