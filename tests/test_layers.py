@@ -43,6 +43,7 @@ MAY_IMPORT: dict[str, frozenset[str]] = {
 APPLICATION = frozenset(
     {
         "__main__",
+        "batch",
         "cli",
         "config",
         "console",
