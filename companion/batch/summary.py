@@ -80,10 +80,7 @@ def summary_text(s: dict[str, Any]) -> str:
             else "none"
         ),
         "alerts per flight hour: "
-        + (
-            ", ".join(f"{k} {v:.1f}" for k, v in sorted(s["alerts_per_flight_hour"].items()))
-            or "none"
-        ),
+        + (", ".join(f"{k} {v:.1f}" for k, v in sorted(alerts.items())) or "none"),
         "time in approach category: "
         + ", ".join(f"{k} {v:.0f} s" for k, v in s["time_in_category_s"].items()),
     ]
