@@ -1,14 +1,15 @@
 """companion batch on a local Dask cluster with one and then two worker processes.
 
 The fleet: ``--flights`` simulated flights (default 500) of ``--duration`` seconds
-(default 30 s) each with a GNSS outage of 4-7 s starting 15-19 s in, the scenarios
-cycling through a fixed-wing cruise, a PX4 rotorcraft and an RTK approach, seeds
-``seed * 100000 + i``; plus the real logs: the bundled originals (tests/data/logs)
-and, where ``../shared/realdata/flights`` is present, every log there (.tlog, .bin,
-.ulg). The same fleet is run with 1 and with 2 workers (one thread each) in this one
-run; printed for each: wall time (the cluster's start included), flights per minute,
-the peak resident memory of each worker; then the ratio of the two rates (goal
->= 1.7 on a 2-core machine) and whether the two tables are identical.
+(default 30 s), as ``companion simulate --many`` makes them (each with a GNSS
+outage of 4-7 s starting half-way, the catalogue's scenarios in turn, seeds
+``seed * 100000 + i``: :mod:`companion.sim.fleet`); plus the real logs: the
+bundled originals (tests/data/logs) and, where ``../shared/realdata/flights`` is
+present, every log there (.tlog, .bin, .ulg). The same fleet is run with 1 and
+with 2 workers (one thread each) in this one run; printed for each: wall time (the
+cluster's start included), flights per minute, the peak resident memory of each
+worker; then the ratio of the two rates (goal >= 1.7 on a 2-core machine) and
+whether the two tables are identical.
 
     python bench/batch.py [--flights 500] [--duration 30] [--seed 1] [--out DIR]
 """
@@ -24,26 +25,11 @@ import time
 from pathlib import Path
 
 from companion.batch.run import flights_per_minute, run_batch
-from companion.sim import make_scenario, simulate
-from companion.sim.scenarios import Event
-from companion.sim.writer import write_flight
+from companion.sim.fleet import write_fleet
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "tests" / "data" / "logs"
 REAL = ROOT.parent / "shared" / "realdata" / "flights"
-SCENARIOS = ("cruise_gnss_loss", "px4_rotorcraft", "approach_rtk20")
-
-
-def make_fleet(out: Path, n: int, duration_s: float, seed: int) -> list[Path]:
-    """``n`` short simulated flights, each in its own folder (the truth CSV beside it)."""
-    paths = []
-    for i in range(n):
-        start = 15.0 + i % 5
-        outage = Event("outage", start, start + 4.0 + i % 4)
-        sc = make_scenario(SCENARIOS[i % len(SCENARIOS)], duration_s=duration_s, events=(outage,))
-        written = write_flight(simulate(sc, seed * 100_000 + i), out / f"flight{i:04d}")
-        paths.append(written[0])
-    return paths
 
 
 def real_logs() -> list[Path]:
@@ -73,7 +59,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out if args.out is not None else Path(tmp)
         t0 = time.perf_counter()
-        fleet = make_fleet(out / "fleet", args.flights, args.duration, args.seed)
+        fleet = write_fleet(out / "fleet", args.flights, args.seed, args.duration)
         gen_s = time.perf_counter() - t0
         real = real_logs()
         print(

@@ -125,6 +125,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     from companion.batch.summary import fleet_summary, summary_text
 
     progress = _Progress(len(expand(args.paths, exclude=args.output)))
+    try:  # imported first: it sets its loggers up on import
+        import distributed  # noqa: F401
+    except ImportError:
+        pass  # run_batch says what to install
     if args.log_level.upper() != "DEBUG":  # Dask's own comings and goings
         logging.getLogger("distributed").setLevel(logging.WARNING)
     result = run_batch(
@@ -189,6 +193,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if args.list:
         for name in sim.SCENARIO_NAMES:
             print(name)
+        return 0
+    if args.many is not None:
+        if args.scenario is not None:
+            raise ValueError("--many makes its own mix of scenarios: give no scenario name")
+        from companion.sim.fleet import write_fleet
+
+        tlogs = write_fleet(args.out, args.many, seed=args.seed, duration_s=args.duration)
+        print(f"{len(tlogs)} flights under {args.out}")
         return 0
     if args.scenario is None:
         raise ValueError("give a scenario name (--list shows them)")
@@ -295,6 +307,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--duration", type=float, help="override the scenario duration, s")
     p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.add_argument(
+        "--many", type=int, metavar="N",
+        help="N varied flights (scenarios in turn, seeds from --seed) in DIR/flight_*/",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("console", help="watch the service from the ground (terminal)")
