@@ -61,6 +61,13 @@ def expand(paths: Iterable[Path | str], exclude: Path | None = None) -> list[str
     return sorted(found)
 
 
+def _size(path: str) -> int:
+    try:
+        return Path(path).stat().st_size
+    except OSError:
+        return 0
+
+
 def _peak_rss_mb() -> float:
     """This process's peak resident memory, MB."""
     import resource
@@ -126,15 +133,18 @@ def run_batch(
         if worker_setup is not None:
             client.run(worker_setup)
         n_workers = len(client.scheduler_info().get("workers", {}))
+        # the biggest logs first, so that no long one is left for the end (the rows are
+        # sorted afterwards: the order of submission changes nothing in the table)
+        order = sorted(range(len(flights)), key=lambda i: (-_size(flights[i]), i))
         futures = client.map(
             score_flight,
-            flights,
+            [flights[i] for i in order],
             config_path=config,
-            key=[f"companion-flight-{i}" for i in range(len(flights))],
+            key=[f"companion-flight-{i}" for i in order],
             retries=1,
             pure=False,
         )
-        by_key = {f.key: path for f, path in zip(futures, flights, strict=True)}
+        by_key = {f.key: flights[i] for f, i in zip(futures, order, strict=True)}
         rows: list[dict[str, Any]] = []
         for fut in as_completed(futures):
             try:
