@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+import uuid
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,11 +46,12 @@ class BatchResult:
 
 
 def expand(paths: Iterable[Path | str], exclude: Path | None = None) -> list[str]:
-    """Files given, and the logs under folders given, sorted and without repeats."""
+    """Files given, and the logs under folders given, as absolute paths (a worker's
+    working folder may be another), sorted and without repeats."""
     found: set[str] = set()
     ex = exclude.resolve() if exclude is not None else None
     for given in paths:
-        p = Path(given)
+        p = Path(given).absolute()
         if p.is_dir():
             for f in p.rglob("*"):
                 if f.is_file() and f.suffix.lower() in LOG_SUFFIXES:
@@ -112,7 +114,7 @@ def run_batch(
         raise BatchError(f"--workers must be at least 1, got {workers}")
     if write:
         out_dir.mkdir(parents=True, exist_ok=True)
-    config = str(config_path) if config_path is not None else None
+    config = str(Path(config_path).absolute()) if config_path is not None else None
     wall0 = time.perf_counter()
     cluster = None
     try:
@@ -136,11 +138,13 @@ def run_batch(
         # the biggest logs first, so that no long one is left for the end (the rows are
         # sorted afterwards: the order of submission changes nothing in the table)
         order = sorted(range(len(flights)), key=lambda i: (-_size(flights[i]), i))
+        batch_id = uuid.uuid4().hex[:12]
         futures = client.map(
             score_flight,
             [flights[i] for i in order],
             config_path=config,
-            key=[f"companion-flight-{i}" for i in order],
+            # unique to this batch: a shared scheduler must not take another batch's flight
+            key=[f"companion-flight-{batch_id}-{i}" for i in order],
             retries=1,
             pure=False,
         )
