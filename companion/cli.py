@@ -154,6 +154,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         raise ValueError("give --truth TRUTH.csv or --against-input IN.tlog (one of them)")
     if args.against_input is not None:
         return _evaluate_against_input(args)
+    if args.config is not None or args.grade is not None:
+        raise ValueError("--config and --grade go with --against-input, not --truth")
     from companion.evaluate import evaluate
 
     if args.plot is not None:  # before the work: a missing extra is one line, not a traceback

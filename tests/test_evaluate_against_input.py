@@ -354,6 +354,7 @@ def test_cli_json_and_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     doc = json.loads(capsys.readouterr().out)
     assert set(doc["verdicts"]) >= {"never_wrong", "coverage95", "gap_alert", "text_rate"}
     assert main(["evaluate", str(out_path)]) == 1  # neither --truth nor --against-input
+    assert main(["evaluate", str(out_path), "--truth", "t.csv", "--grade", "mems"]) == 1
     assert main(["evaluate", str(out_path), "--against-input", str(tmp_path / "x")]) == 1
     assert "no such file" in capsys.readouterr().err
 

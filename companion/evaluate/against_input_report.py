@@ -255,8 +255,8 @@ class AgainstInput:
             f"published: {self.n_solutions} solutions from {self.solution_source or 'nothing'}",
             "",
             f"never confidently wrong: {c.n_wrong} of {c.n_evaluated} fixes >= 3D more than 25 m"
-            f" from the receiver (max {_m(c.max_h_m)} at t={_s(c.max_h_t_s)}, |dV| max "
-            f"{_m(c.max_v_m)}; {c.n_no_concurrent_fix} without a concurrent fix)"
+            f" from the receiver (max {_m(c.max_h_m)} at t={_s(c.max_h_t_s)} s; vertical, not"
+            f" judged, max {_m(c.max_v_m)}; {c.n_no_concurrent_fix} without a concurrent fix)"
             f"  {_mark(c.passed_wrong)}",
             f"95 % bound (RSS with the receiver's) covers the fix: {_pct(c.coverage)}"
             f" (>= 95 %)  {_mark(c.passed_coverage)}",
