@@ -21,18 +21,13 @@ ULOG_MAGIC = b"ULog"
 
 
 def log_format(path: Path | str) -> str:
-    """``"dataflash"``, ``"ulog"`` or ``"tlog"`` (the rest) from the first bytes.
-
-    Raises
-    ------
-    TlogError
-        If the file cannot be opened.
-    """
+    """``"dataflash"``, ``"ulog"`` or ``"tlog"`` (the rest, and a file that cannot be
+    opened: the tlog reader says why) from the first bytes."""
     try:
         with open(path, "rb") as fh:
             head = fh.read(8)
-    except OSError as exc:
-        raise TlogError(f"cannot open log {path}: {exc.strerror or exc}") from exc
+    except OSError:
+        return "tlog"
     if head.startswith(DATAFLASH_MAGIC):
         return "dataflash"
     if head.startswith(ULOG_MAGIC):
