@@ -16,7 +16,7 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,plot,console]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,plot,console,batch]'
 	touch $@
 
 demo: setup

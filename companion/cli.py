@@ -1,5 +1,5 @@
-"""``companion``: run | replay | evaluate | simulate | console | config-template | install-unit
-| inspect.
+"""``companion``: run | replay | evaluate | batch | simulate | console | config-template
+| install-unit | inspect.
 
 The only place that configures logging and prints. Every expected failure
 (bad file, bad configuration, unknown scenario) is one line on stderr and a
@@ -12,6 +12,7 @@ import argparse
 import json
 import logging
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -85,6 +86,69 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Progress:
+    """A one-line progress bar on a terminal (a line every tenth otherwise), on stderr."""
+
+    def __init__(self, total: int) -> None:
+        self.total = total
+        self.done = 0
+        self.errors = 0
+        self._tty = sys.stderr.isatty()
+        self._t0 = time.perf_counter()
+        self._last_tenth = -1
+
+    def step(self, error: bool) -> None:
+        self.done += 1
+        self.errors += int(error)
+        width = 30
+        filled = width * self.done // max(self.total, 1)
+        rate = self.done / max(time.perf_counter() - self._t0, 1e-9) * 60.0
+        text = (
+            f"[{'#' * filled}{'.' * (width - filled)}] {self.done}/{self.total} flights, "
+            f"{self.errors} errors, {rate:.0f}/min"
+        )
+        if self._tty:
+            sys.stderr.write("\r" + text + ("\n" if self.done == self.total else ""))
+        elif 10 * self.done // max(self.total, 1) != self._last_tenth:
+            self._last_tenth = 10 * self.done // max(self.total, 1)
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+
+def _quiet_worker() -> None:
+    """On a batch worker: the replays' warnings stay out of its log (the rows have them)."""
+    logging.getLogger("companion").setLevel(logging.ERROR)
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from companion.batch.run import expand, run_batch
+    from companion.batch.summary import fleet_summary, summary_text
+
+    progress = _Progress(len(expand(args.paths, exclude=args.output)))
+    try:  # imported first: it sets its loggers up on import
+        import distributed  # noqa: F401
+    except ImportError:
+        pass  # run_batch says what to install
+    if args.log_level.upper() != "DEBUG":  # Dask's own comings and goings
+        logging.getLogger("distributed").setLevel(logging.WARNING)
+    result = run_batch(
+        args.paths,
+        args.output,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        config_path=args.config,
+        table_format=args.format,
+        plots=not args.no_plots,
+        progress=None if args.quiet else progress.step,
+        worker_setup=_quiet_worker,
+    )
+    print(summary_text(fleet_summary(result.rows)))
+    print(f"table: {result.table}")
+    for path in result.summary:
+        print(f"summary: {path}")
+    return 0
+
+
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     if (args.truth is None) == (args.against_input is None):
         raise ValueError("give --truth TRUTH.csv or --against-input IN.tlog (one of them)")
@@ -131,6 +195,14 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if args.list:
         for name in sim.SCENARIO_NAMES:
             print(name)
+        return 0
+    if args.many is not None:
+        if args.scenario is not None:
+            raise ValueError("--many makes its own mix of scenarios: give no scenario name")
+        from companion.sim.fleet import write_fleet
+
+        tlogs = write_fleet(args.out, args.many, seed=args.seed, duration_s=args.duration)
+        print(f"{len(tlogs)} flights under {args.out}")
         return 0
     if args.scenario is None:
         raise ValueError("give a scenario name (--list shows them)")
@@ -212,8 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record-dir", help="flight recorder folder ('' disables)")
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("replay", help="replay a .tlog through the service")
-    p.add_argument("input", type=Path, help="recorded flight (.tlog)")
+    p = sub.add_parser("replay", help="replay a .tlog, .bin or .ulg through the service")
+    p.add_argument("input", type=Path, help="recorded flight (.tlog, DataFlash .bin, PX4 .ulg)")
     p.add_argument("--output", "-o", type=Path, required=True, help="what the service sends")
     p.add_argument("--config", type=Path, help="TOML configuration file")
     p.add_argument("--grade", help=GRADE_HELP)
@@ -237,12 +309,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, help="draw the track and errors to this PNG")
     p.set_defaults(func=_cmd_evaluate)
 
+    p = sub.add_parser("batch", help="replay and score many logs on a Dask cluster")
+    p.add_argument("paths", nargs="+", type=Path, help="logs, or folders of them (recursive)")
+    p.add_argument("--output", "-o", type=Path, required=True, help="folder of the table")
+    p.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    p.add_argument("--scheduler", help="address of a running Dask scheduler (tcp://HOST:8786)")
+    p.add_argument("--config", type=Path, help="TOML configuration file for every replay")
+    p.add_argument(
+        "--format", choices=("auto", "parquet", "csv"), default="auto",
+        help="table format (auto: Parquet when pyarrow is installed)",
+    )  # fmt: skip
+    p.add_argument("--no-plots", action="store_true", help="no fleet.png")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_batch)
+
     p = sub.add_parser("simulate", help="simulate a flight: .tlog, truth CSV, JSON sidecar")
     p.add_argument("scenario", nargs="?", help="scenario name (--list shows them)")
     p.add_argument("--out", type=Path, default=Path("."), help="output folder")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--duration", type=float, help="override the scenario duration, s")
     p.add_argument("--list", action="store_true", help="list the scenarios")
+    p.add_argument(
+        "--many", type=int, metavar="N",
+        help="N varied flights (scenarios in turn, seeds from --seed) in DIR/flight_*/",
+    )  # fmt: skip
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("console", help="watch the service from the ground (terminal)")
@@ -311,6 +401,7 @@ _EXPECTED_ERRORS = (
     ("companion.mavlink.link", "LinkError"),
     ("companion.mavlink.tlog", "TlogError"),
     ("companion.evaluate.plot", "PlotUnavailableError"),
+    ("companion.batch.run", "BatchError"),
 )
 """The package's exceptions a user can cause (one line, exit 1), by module."""
 

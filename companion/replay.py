@@ -1,4 +1,8 @@
-"""Replay a recorded flight (.tlog) through the service, as fast as the CPU allows.
+"""Replay a recorded flight through the service, as fast as the CPU allows.
+
+The flight is a telemetry log (.tlog), an ArduPilot DataFlash log (.bin) or a PX4
+ULog (.ulg), told apart by content (:func:`companion.mavlink.logs.open_flight_log`;
+the latter two read as the MAVLink streams a telemetry log of the flight holds).
 
 Every message the service would send is written to the output .tlog, stamped
 with the input log's time of the message that caused it; what the pipeline sends
@@ -21,7 +25,8 @@ from pathlib import Path
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
-from companion.mavlink.tlog import TlogError, TlogReader, TlogWriter, describe_file
+from companion.mavlink.logs import open_flight_log
+from companion.mavlink.tlog import TlogError, TlogWriter, describe_file
 from companion.pipeline import Pipeline
 
 log = logging.getLogger(__name__)
@@ -69,12 +74,19 @@ def replay(
     another format, or no record in it (the message says what the file looks like; no
     output is written then). A tlog with some corrupt records replays the rest.
     """
-    # the decoder is the only consumer of the messages: light messages where it takes them
-    reader = TlogReader(in_path, light_ids=LIGHT_MESSAGE_IDS)
+    # the decoder is the only consumer of the messages: light messages where it takes them;
+    # a DataFlash .bin or a PX4 .ulg (by content) is read as the streams its .tlog holds
+    reader = open_flight_log(in_path, light_ids=LIGHT_MESSAGE_IDS)
+    prefix = getattr(reader, "stats_prefix", "tlog_")
     records = iter(reader)
     first_record = next(records, None)
     if first_record is None:  # before the pipeline is built: the error is all that is said
-        raise TlogError(f"{in_path}: no tlog record: {describe_file(in_path)}")
+        if prefix == "tlog_":
+            raise TlogError(f"{in_path}: no tlog record: {describe_file(in_path)}")
+        raise TlogError(
+            f"{in_path}: {reader.what} with nothing to replay in it "
+            "(no IMU, attitude, GNSS or position record)"
+        )
     pipeline = Pipeline(config)
     wall0 = time.perf_counter()
     first_t: float | None = None
@@ -103,11 +115,13 @@ def replay(
             count += 1
             if progress is not None and count % PROGRESS_EVERY_MESSAGES == 0:
                 progress(f"{in_path.name}: {count} messages, {t_rx_s - first_t:.0f} s of flight")
-    pipeline.bad_frames(reader.stats["bad_region"])
+    tlog = prefix == "tlog_"
+    if tlog:  # a corrupt region of a tlog is a corrupt frame, as live
+        pipeline.bad_frames(reader.stats["bad_region"])
     rejections = dict(pipeline.decoder.rejections)
     for reason, n in reader.stats.items():
-        if n and reason not in ("bad_region", "bad_bytes"):
-            rejections[f"tlog_{reason}"] = n
+        if n and reason != "bad_bytes" and not (tlog and reason == "bad_region"):
+            rejections[f"{prefix}{reason}"] = n
     return ReplaySummary(
         messages_in=pipeline.stats.messages_in,
         messages_out=pipeline.stats.messages_out,

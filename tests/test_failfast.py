@@ -273,9 +273,10 @@ PNG = b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + bytes(64)
 @pytest.mark.parametrize(
     ("name", "content", "says"),
     [
-        ("flight.tlog", DATAFLASH, "an ArduPilot DataFlash log (.bin), not a .tlog: reading .bin"),
-        ("00000042.BIN", DATAFLASH, "an ArduPilot DataFlash log (.bin)"),
-        ("flight.tlog", ULOG, "a PX4 ULog (.ulg), not a .tlog: reading .ulg is planned"),
+        # read by content, whatever the name, and refused when there is nothing in them
+        ("flight.tlog", DATAFLASH, "an ArduPilot DataFlash log (.bin) with nothing to replay"),
+        ("00000042.BIN", DATAFLASH, "an ArduPilot DataFlash log (.bin) with nothing to replay"),
+        ("flight.tlog", ULOG, "a PX4 ULog (.ulg) with nothing to replay"),
         ("flight.tlog", PNG, "a PNG image, not a .tlog"),
         ("flight.tlog", b"", "no tlog record: an empty file"),
         (
@@ -300,8 +301,8 @@ def test_replay_of_a_file_that_is_no_tlog_is_one_line_naming_what_it_is(
 @pytest.mark.parametrize(
     ("content", "says"),
     [
-        (DATAFLASH, "an ArduPilot DataFlash log (.bin)"),
-        (ULOG, "a PX4 ULog (.ulg)"),
+        (DATAFLASH, "an ArduPilot DataFlash log (.bin), not a .tlog: `companion replay` reads"),
+        (ULOG, "a PX4 ULog (.ulg), not a .tlog: `companion replay` reads it"),
         (PNG, "a PNG image"),
         (b"", "an empty file"),
     ],

@@ -47,6 +47,7 @@ MAY_IMPORT: dict[str, frozenset[str]] = {
 APPLICATION = frozenset(
     {
         "__main__",
+        "batch",
         "cli",
         "config",
         "console",

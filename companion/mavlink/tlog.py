@@ -27,10 +27,11 @@ open (:class:`TlogError`). What it skips, it counts in :attr:`TlogReader.stats`:
     last of them on. The earlier ones of the run stay skipped.
 
 A file that is plainly something else (an ArduPilot DataFlash ``.bin``, a PX4
-``.ulg``, an image, an archive), judged by its first bytes and never by its name, is
-refused at once with a :class:`TlogError` that says what it is and what to do; a
-record's 8-byte UNIX-epoch or boot-time stamp never starts with those bytes. For a
-file in which no record was found, :func:`describe_file` says what it looks like.
+``.ulg`` — :mod:`companion.mavlink.logs` reads those —, an image, an archive), judged
+by its first bytes and never by its name, is refused at once with a :class:`TlogError`
+that says what it is and what to do; a record's 8-byte UNIX-epoch or boot-time stamp
+never starts with those bytes. For a file in which no record was found,
+:func:`describe_file` says what it looks like.
 """
 
 from __future__ import annotations
@@ -66,16 +67,10 @@ class TlogError(Exception):
     """The log cannot be read at all (missing, unreadable, a directory, another format...)."""
 
 
-_USE_TLOG = "use the flight's .tlog (ground station, MAVProxy or the flight recorder)"
+_REPLAY_IT = "`companion replay` reads it and writes the .tlog this takes"
 _FOREIGN_FORMATS: tuple[tuple[bytes, str], ...] = (
-    (
-        b"\xa3\x95",
-        f"an ArduPilot DataFlash log (.bin), not a .tlog: reading .bin is planned; {_USE_TLOG}",
-    ),
-    (
-        b"ULog",
-        f"a PX4 ULog (.ulg), not a .tlog: reading .ulg is planned; {_USE_TLOG}",
-    ),
+    (b"\xa3\x95", f"an ArduPilot DataFlash log (.bin), not a .tlog: {_REPLAY_IT}"),
+    (b"ULog", f"a PX4 ULog (.ulg), not a .tlog: {_REPLAY_IT}"),
     (b"\x89PNG\r\n\x1a\n", "a PNG image, not a .tlog"),
     (b"\xff\xd8\xff", "a JPEG image, not a .tlog"),
     (b"%PDF", "a PDF document, not a .tlog"),
