@@ -160,7 +160,12 @@ def run_batch(
             if progress is not None:
                 progress(bool(row.get("error")))
             fut.release()
-        peaks = client.run(_peak_rss_mb)
+        # a worker lost during the batch must not hold this up: its error is left out
+        peaks = {
+            k: v
+            for k, v in client.run(_peak_rss_mb, on_error="return").items()
+            if isinstance(v, float)
+        }
     finally:
         client.close()
         if cluster is not None:
