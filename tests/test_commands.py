@@ -28,6 +28,7 @@ from companion.mavlink.ids import (
     MAV_RESULT_TEMPORARILY_REJECTED,
     MAV_RESULT_UNSUPPORTED,
 )
+from companion.mavlink.readback import PublishedText, TextJoiner
 from companion.mavlink.tlog import TlogReader
 from companion.mavlink.units import CDEG_PER_RAD
 from companion.nav.heading import HeadingStatus
@@ -136,7 +137,14 @@ def acks(msgs: list[Any]) -> list[Any]:
 
 
 def texts(msgs: list[Any]) -> list[str]:
-    return [m.text for m in msgs if m.get_type() == "STATUSTEXT"]
+    """The whole texts (a long one's chunks joined)."""
+    joiner = TextJoiner()
+    done = [
+        joiner.add(0, PublishedText(m.text, m.severity, m.id))
+        for m in msgs
+        if m.get_type() == "STATUSTEXT"
+    ]
+    return [text for _, text, _ in filter(None, done)]
 
 
 def codes(msgs: list[Any]) -> list[str]:
