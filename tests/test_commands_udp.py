@@ -48,10 +48,12 @@ def free_udp_port() -> int:
 class Autopilot(threading.Thread):
     """Sends the taxi's frames to the service at FEED_RATE_HZ until stopped."""
 
-    def __init__(self, frames: list[bytes], port: int) -> None:
+    def __init__(self, frames: list[bytes], port: int, *more_ports: int) -> None:
+        """``frames`` to ``port`` (and to ``more_ports``: a router's other listeners)."""
         super().__init__(daemon=True)
         self.frames = frames
         self.port = port
+        self.ports = (port, *more_ports)
         self.stop = threading.Event()
         self.sent = 0
 
@@ -65,7 +67,8 @@ class Autopilot(threading.Thread):
                 delay = start + k / FEED_RATE_HZ - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
-                sock.sendto(frame, ("127.0.0.1", self.port))
+                for port in self.ports:
+                    sock.sendto(frame, ("127.0.0.1", port))
                 self.sent += 1
 
 

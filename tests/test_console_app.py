@@ -12,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -41,22 +40,8 @@ class Router(Autopilot):
     MAVLink router merges the autopilot and the companion on a ground station's link)."""
 
     def __init__(self, frames: list[bytes], port: int, console_port: int) -> None:
-        super().__init__(frames, port)
+        super().__init__(frames, port, console_port)
         self.console_port = console_port
-
-    def run(self) -> None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            sock.bind(("127.0.0.1", 0))
-            start = time.monotonic()
-            for k, frame in enumerate(self.frames):
-                if self.stop.is_set():
-                    return
-                delay = start + k / FEED_RATE_HZ - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                sock.sendto(frame, ("127.0.0.1", self.port))
-                sock.sendto(frame, ("127.0.0.1", self.console_port))
-                self.sent += 1
 
 
 def text_of(app: ConsoleApp, panel: str) -> str:

@@ -24,6 +24,7 @@ import numpy as np
 
 from companion.mavlink.decode.decoder import Decoder
 from companion.mavlink.tlog import read_tlog
+from companion.sim.trajectory import euler_to_mat_nb_batch
 from companion.types import AttitudeSample, AutopilotSolution, FixType, GnssFix, ImuSample
 
 G0_MPS2 = 9.80665
@@ -51,22 +52,6 @@ class LogStats:
 
     name: str
     stats: dict[str, float | None] = field(default_factory=dict)
-
-
-def _euler_to_mat_nb(r: np.ndarray, p: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Body-to-NED rotation matrices (N, 3, 3) from ZYX Euler angles."""
-    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
-    m = np.empty((len(r), 3, 3))
-    m[:, 0, 0] = cp * cy
-    m[:, 0, 1] = sr * sp * cy - cr * sy
-    m[:, 0, 2] = cr * sp * cy + sr * sy
-    m[:, 1, 0] = cp * sy
-    m[:, 1, 1] = sr * sp * sy + cr * cy
-    m[:, 1, 2] = cr * sp * sy - sr * cy
-    m[:, 2, 0] = -sp
-    m[:, 2, 1] = sr * cp
-    m[:, 2, 2] = cr * cp
-    return m
 
 
 def _rest_mask(
@@ -200,7 +185,7 @@ def _imu_stats(
         j = np.where(np.abs(ta[j - 1] - tr) < np.abs(ta[j] - tr), j - 1, j)
         close = np.abs(ta[j] - tr) < 0.2
         if close.sum() >= 10:
-            m = _euler_to_mat_nb(eul[j[close], 0], eul[j[close], 1], eul[j[close], 2])
+            m = euler_to_mat_nb_batch(eul[j[close]])
             f_n = np.einsum("nij,nj->ni", m, acc[rest][close])
             resid = f_n + np.array([0.0, 0.0, G0_MPS2])
             # a 1 s mean removes the white noise; what is left is attitude/bias disagreement
