@@ -34,11 +34,15 @@ class InspectSummary:
     alerts: int
     epoch0_tow_s: float
     rejected: dict[str, int]
+    fis_unavailable: int = 0
+    fis_restarts: int = 0
 
     def to_text(self) -> str:
         return (
             f"epoch 0 at GPS time of week {self.epoch0_tow_s:.3f} s; {self.solved} of "
-            f"{self.epochs} epochs solved; FIS-RAIM alerts: {self.alerts}\n"
+            f"{self.epochs} epochs solved; FIS-RAIM alerts: {self.alerts}, unavailable "
+            f"(a subset's separation too noisy) at {self.fis_unavailable} epochs, window "
+            f"restarted at {self.fis_restarts} changes of the signal set\n"
             f"rejections: {self.rejected}"
         )
 
@@ -101,13 +105,15 @@ def inspect_file(
                     f"{ep.tow_s:.3f}", f"{math.degrees(la):.9f}", f"{math.degrees(lo):.9f}",
                     f"{h:.4f}", f"{e:.4f}", f"{n:.4f}", f"{u:.4f}",
                     len({k[:2] for k in tp.keys}),
-                    "" if res is None else f"{res.slope_mps:.5f}",
-                    "" if res is None else f"{res.residual_m2:.5f}",
+                    "" if res is None or not res.available else f"{res.slope_mps:.5f}",
+                    "" if res is None or not res.available else f"{res.residual_m2:.5f}",
                     int(alert),
                 ]
             )  # fmt: skip
     rejected.update(est.rejected)
-    return InspectSummary(len(epochs), solved, alerts, ep0.tow_s, dict(rejected))
+    return InspectSummary(
+        len(epochs), solved, alerts, ep0.tow_s, dict(rejected), fis.unavailable, fis.restarts
+    )
 
 
 def parse_reference(text: str) -> tuple[float, float, float]:

@@ -7,12 +7,22 @@ fitted: the *slope test* trips on a slope beyond ``slope_limit_mps`` (a slow ram
 *residual test* on a residual sum of squares about the line beyond
 σ² · χ²⁻¹(95 %, m − 2) with σ = 30 cm and m points in the window (a dither).
 
+The series is one quantity only while the linear system is the same: when a signal
+leaves the set (a slip, a lost signal) every separation changes by a step, so the window
+starts again, and the slope test waits for a full window (its threshold is set for
+one). The tests assume the separation's own noise is within the residual test's σ:
+the predicted σ of each subset's separation, σ_φ·sqrt(λmax(P_j − P)) (P, P_j the
+position covariances of the full and the subset solution at unit weight σ_φ), must stay
+below ``residual_sigma_m``, else FIS-RAIM is *unavailable* at that epoch (as RAIM is
+when its protection level exceeds the alert limit): no test, no alert, counted.
+
 Standard RAIM: the weighted sum of squared residuals of one epoch's least-squares
 solution against χ²⁻¹(1 − P_fa, rows − unknowns), σ given.
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -31,6 +41,10 @@ class FisRaimConfig:
     residual_sigma_m: float = 0.30
     residual_prob: float = 0.95
     min_points: int = 8
+    phase_sigma_m: float = 0.05
+    """σ of one signal's time-differenced carrier at unit weight (zenith): the walk's
+    a-posteriori σ while walking is 5-7 cm (0.7 cm standing), multipath of a handheld
+    antenna; Kim, Walter and Powell's aircraft in open sky would be nearer 1 cm."""
 
 
 @dataclass(frozen=True)
@@ -42,6 +56,10 @@ class FisRaimResult:
     residual_limit_m2: float
     slope_alert: bool
     residual_alert: bool
+    available: bool = True
+    """False where a subset's predicted separation σ exceeds the residual test's σ."""
+    separation_sigma_m: float = 0.0
+    """The largest predicted separation σ of the subsets."""
 
     @property
     def alert(self) -> bool:
@@ -54,10 +72,22 @@ def subset_separations(point: TrackPoint) -> dict[tuple[str, int], float]:
     Subsets that cannot be solved (fewer rows than unknowns, fewer than four
     satellites) are left out.
     """
+    return {sat: d for sat, (d, _) in subset_geometry(point).items()}
+
+
+def subset_geometry(point: TrackPoint) -> dict[tuple[str, int], tuple[float, float]]:
+    """Per satellite left out: (separation m, sqrt(λmax(P_j − P)) per metre of σ_φ).
+
+    The second is the separation's predicted σ at unit-weight phase σ of 1 m: the
+    largest standard deviation, over directions, of the difference of two weighted
+    least-squares solutions that share every row but the left-out ones (its covariance
+    is P_j − P for the weights used).
+    """
     g, y, w = point.g_enu, point.y_m, point.w
     full = wls(g, y, w)[:3]
+    p_full = np.linalg.pinv(g.T @ (g * w[:, None]))[:3, :3]
     sats = sorted({k[:2] for k in point.keys})
-    out: dict[tuple[str, int], float] = {}
+    out: dict[tuple[str, int], tuple[float, float]] = {}
     for sat in sats:
         keep = np.array([k[:2] != sat for k in point.keys])
         gs = g[keep]
@@ -67,8 +97,11 @@ def subset_separations(point: TrackPoint) -> dict[tuple[str, int], float]:
             continue
         if np.linalg.matrix_rank(gs) < gs.shape[1]:
             continue
-        sub = wls(gs, y[keep], w[keep])[:3]
-        out[sat] = float(np.linalg.norm(sub - full))
+        ws = w[keep]
+        sub = wls(gs, y[keep], ws)[:3]
+        p_sub = np.linalg.pinv(gs.T @ (gs * ws[:, None]))[:3, :3]
+        amp = math.sqrt(max(float(np.linalg.eigvalsh(p_sub - p_full).max()), 0.0))
+        out[sat] = (float(np.linalg.norm(sub - full)), amp)
     return out
 
 
@@ -79,20 +112,39 @@ class FisRaim:
     def __post_init__(self) -> None:
         self._series: deque[tuple[float, float]] = deque()
         self._limits: dict[int, float] = {}
+        self._keys: tuple[tuple[str, int, str], ...] = ()
+        self._since_s = math.inf
+        self.restarts = 0
+        """Windows started again because the set of signals changed."""
+        self.unavailable = 0
+        """Epochs without a test: a subset's predicted separation σ too large."""
 
     def update(self, point: TrackPoint) -> FisRaimResult | None:
         """Add one epoch; None while fewer than five satellites leave no separation."""
-        seps = subset_separations(point)
-        if not seps:
-            return None
         cfg = self.config
-        sep = max(seps.values())
+        if point.keys != self._keys:
+            if self._keys:
+                self.restarts += 1
+            self._series.clear()
+            self._keys = point.keys
+        geo = subset_geometry(point)
+        if not geo:
+            self._series.clear()
+            return None
+        sep = max(d for d, _ in geo.values())
+        sigma = cfg.phase_sigma_m * max(a for _, a in geo.values())
+        if sigma > cfg.residual_sigma_m:
+            self.unavailable += 1
+            self._series.clear()
+            return FisRaimResult(point.t_s, sep, 0.0, 0.0, math.inf, False, False, False, sigma)
+        if not self._series:
+            self._since_s = point.t_s
         self._series.append((point.t_s, sep))
         while self._series and self._series[0][0] < point.t_s - cfg.window_s:
             self._series.popleft()
         m = len(self._series)
         if m < cfg.min_points:
-            return FisRaimResult(point.t_s, sep, 0.0, 0.0, np.inf, False, False)
+            return FisRaimResult(point.t_s, sep, 0.0, 0.0, math.inf, False, False, True, sigma)
         t = np.array([p[0] for p in self._series])
         s = np.array([p[1] for p in self._series])
         a = np.vstack([t - t.mean(), np.ones(m)]).T
@@ -103,8 +155,17 @@ class FisRaim:
             lim = cfg.residual_sigma_m**2 * float(chi2.ppf(cfg.residual_prob, m - 2))
             self._limits[m] = lim
         slope = float(coef[0])
+        full = point.t_s - self._since_s >= cfg.window_s
         return FisRaimResult(
-            point.t_s, sep, slope, rss, lim, slope > cfg.slope_limit_mps, rss > lim
+            point.t_s,
+            sep,
+            slope,
+            rss,
+            lim,
+            full and slope > cfg.slope_limit_mps,
+            rss > lim,
+            True,
+            sigma,
         )
 
 
