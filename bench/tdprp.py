@@ -11,12 +11,14 @@ Accuracy rows: L1 only (GPS L1 C/A + Galileo E1, the single frequency of the pap
 and every frequency, each with and without the epoch-to-epoch slip test, with the
 paper's code-minus-carrier ionospheric regression off and (L1) on.
 
-Integrity: the every-frequency solution with the slip test (more satellites stay in
-the set than with L1 alone, which ends with four) with a 4 cm/s ramp and a
-1 m dither (period 10 s) injected from t = 30 s into the code, carrier and Doppler of
-one satellite (the highest of those kept through the untouched run); FIS-RAIM alert
-time against a standard residual RAIM (code solution, χ², σ = 5 m, P_fa = 1e-3), and
-the alerts on the untouched run.
+Integrity: the every-frequency solution (more satellites stay in the set than with L1
+alone, which ends with four), without and with the epoch-to-epoch slip test, with a
+4 cm/s ramp and a 1 m dither (period 10 s) injected from t = 30 s into the code,
+carrier and Doppler of one satellite (the highest of those kept through the untouched
+run with the slip test); FIS-RAIM alert time against a standard residual RAIM (code
+solution, χ², σ = 5 m, P_fa = 1e-3), the alerts on the untouched run, the epochs where
+FIS-RAIM is unavailable (a subset's predicted separation σ above 0.30 m) and its window
+restarts (the signal set changed).
 
 Simulated approaches: ``--approaches`` (20) seeded inspection flights from raw
 observations (``companion.raw.simulate``: the walk's broadcast orbits, noise,
@@ -91,6 +93,11 @@ def raim_run(session: Session, cfg: TdprpConfig, epochs: list[RawEpoch]):
     """(t, FIS alert, slope alert, residual alert, standard alert) per epoch."""
     est, points = track(session, cfg, epochs)
     fis = FisRaim()
+    rows = _raim_rows(session, cfg, epochs, points, fis)
+    return rows, est, fis
+
+
+def _raim_rows(session, cfg, epochs, points, fis):
     rows = []
     x = session.x0_ecef_m
     for ep, tp in points:
@@ -110,7 +117,13 @@ def raim_run(session: Session, cfg: TdprpConfig, epochs: list[RawEpoch]):
                 std,
             )
         )
-    return rows, est
+    return rows
+
+
+def fis_keys(session: Session, cfg: TdprpConfig, epochs: list[RawEpoch]):
+    """(t, satellites in the set) per solved epoch."""
+    _, points = track(session, cfg, epochs)
+    return [(tp.t_s, {k[:2] for k in tp.keys}) for _, tp in points if tp is not None]
 
 
 def first_alert(rows, column: int, after_s: float) -> float | None:
@@ -292,17 +305,10 @@ def main() -> int:
 
     cfg = variants[4][1]
     _, clean = track(session, cfg)
-    kept = [tp for _, tp in clean if tp is not None][-1].keys
     # the highest satellite kept to the end: elevation from the last linear system's row
     last = [tp for _, tp in clean if tp is not None][-1]
     up = -last.g_enu[:, 2]
     victim = last.keys[int(np.argmax(up))][:2]
-    excluded_runs = {}
-    print(
-        f"\nFIS-RAIM (window 10 s, slope > 0.015 m/s, RSS > 0.3^2 chi2(95%, m-2)) and "
-        f"standard code RAIM (sigma {CODE_SIGMA_M} m); fault on {victim} from "
-        f"t = {FAULT_START_S:.0f} s; set kept: {len(kept)} signals"
-    )
     t0 = session.epochs[0].tow_s
     runs = {
         "untouched": session.epochs,
@@ -313,32 +319,47 @@ def main() -> int:
             session.epochs, *victim, t0 + FAULT_START_S, faults.dither(1.0, 10.0)
         ),
     }
-    print("alert counts and first alerts from t = 30 s on, in every run")
     print(
-        f"{'run':18s} {'FIS alerts':>10s} {'FIS first (s after start)':>26s} "
-        f"{'slope/resid':>12s} {'std alerts':>10s} {'std first':>10s}"
+        f"\nFIS-RAIM (window 10 s, slope > 0.015 m/s, RSS > 0.3^2 chi2(95%, m-2), "
+        f"unavailable where a subset's predicted separation sigma > 0.30 m at 5 cm phase "
+        f"sigma) and standard code RAIM (sigma {CODE_SIGMA_M} m); fault on {victim} from "
+        f"t = {FAULT_START_S:.0f} s; alert counts and first alerts from t = 30 s on"
     )
-    for name, eps in runs.items():
-        rows, est = raim_run(session, cfg, eps)
-        excluded_runs[name] = {k: v for k, v in est.excluded.items() if k[:2] == victim}
-        after = FAULT_START_S  # the untouched run: its first alert in the same span
-        fis_first = first_alert(rows, 1, after)
-        slope_first = first_alert(rows, 2, after)
-        resid_first = first_alert(rows, 3, after)
-        std_first = first_alert(rows, 4, after)
-        n_fis = sum(r[1] for r in rows if r[0] >= FAULT_START_S)
-        n_std = sum(r[4] for r in rows if r[0] >= FAULT_START_S)
-        fmt = lambda v: "none" if v is None else f"{v:.2f}"  # noqa: E731
-        extra = ""
-        if name.startswith("ramp") and fis_first is not None:
-            extra = f"  (ramp then {0.04 * fis_first:.2f} m)"
+    for cfg_name, cfg in (
+        ("every frequency", variants[3][1]),
+        ("every frequency, epoch-to-epoch slip test", variants[4][1]),
+    ):
+        print(f"\n{cfg_name}")
         print(
-            f"{name:18s} {n_fis:10d} {fmt(fis_first):>26s} "
-            f"{fmt(slope_first) + '/' + fmt(resid_first):>12s} {n_std:10d} "
-            f"{fmt(std_first):>10s}{extra}"
+            f"{'run':18s} {'FIS alerts':>10s} {'FIS first (s after start)':>26s} "
+            f"{'slope/resid':>12s} {'std alerts':>10s} {'std first':>10s} "
+            f"{'unavail':>7s} {'restarts':>8s}"
         )
-    for name, ex in excluded_runs.items():
-        print(f"{name}: signals of {victim} excluded by the slip tests: {ex or 'none'}")
+        excluded_runs = {}
+        for name, eps in runs.items():
+            rows, est, fis = raim_run(session, cfg, eps)
+            excluded_runs[name] = {k: v for k, v in est.excluded.items() if k[:2] == victim}
+            gone = next((t for t, keys in fis_keys(session, cfg, eps) if victim not in keys), None)
+            if gone is not None:
+                excluded_runs[name]["victim out of the set at t (s)"] = f"{gone:.2f}"
+            fis_first = first_alert(rows, 1, FAULT_START_S)
+            slope_first = first_alert(rows, 2, FAULT_START_S)
+            resid_first = first_alert(rows, 3, FAULT_START_S)
+            std_first = first_alert(rows, 4, FAULT_START_S)
+            n_fis = sum(r[1] for r in rows if r[0] >= FAULT_START_S)
+            n_fis_all = sum(r[1] for r in rows)
+            n_std = sum(r[4] for r in rows if r[0] >= FAULT_START_S)
+            fmt = lambda v: "none" if v is None else f"{v:.2f}"  # noqa: E731
+            extra = f"  ({n_fis_all} over the whole run)" if name == "untouched" else ""
+            if name.startswith("ramp") and fis_first is not None:
+                extra = f"  (ramp then {0.04 * fis_first:.2f} m)"
+            print(
+                f"{name:18s} {n_fis:10d} {fmt(fis_first):>26s} "
+                f"{fmt(slope_first) + '/' + fmt(resid_first):>12s} {n_std:10d} "
+                f"{fmt(std_first):>10s} {fis.unavailable:7d} {fis.restarts:8d}{extra}"
+            )
+        for name, ex in excluded_runs.items():
+            print(f"{name}: signals of {victim} excluded by the slip tests: {ex or 'none'}")
     if args.approaches:
         approaches(session, args.approaches, args.seed)
     return 0
