@@ -18,7 +18,9 @@ carrier and Doppler of one satellite (the highest of those kept through the unto
 run with the slip test); FIS-RAIM alert time against a standard residual RAIM (code
 solution, χ², σ = 5 m, P_fa = 1e-3), the alerts on the untouched run, the epochs where
 FIS-RAIM is unavailable (a subset's predicted separation σ above 0.30 m) and its window
-restarts (the signal set changed).
+restarts (the signal set changed) and the available epochs where the slope test waits
+for its window to fill again ("no slope"); and the same with the window's past epochs
+solved again with the signals left at a set change instead of a restart.
 
 Simulated approaches: ``--approaches`` (20) seeded inspection flights from raw
 observations (``companion.raw.simulate``: the walk's broadcast orbits, noise,
@@ -43,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from companion.raw import faults  # noqa: E402
 from companion.raw.obs import ALL_BANDS, L1_BANDS, RawEpoch  # noqa: E402
-from companion.raw.raim import FisRaim, chi2_raim  # noqa: E402
+from companion.raw.raim import FisRaim, FisRaimConfig, chi2_raim  # noqa: E402
 from companion.raw.spp import code_solution  # noqa: E402
 from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint  # noqa: E402
 from companion.ubx.session import Session, load_session  # noqa: E402
@@ -89,10 +91,10 @@ def score(session: Session, points: list[tuple[RawEpoch, TrackPoint | None]]) ->
     return Score(len(e), missing, rms(h), float(h.max()), rms(v), float(v.max()))
 
 
-def raim_run(session: Session, cfg: TdprpConfig, epochs: list[RawEpoch]):
+def raim_run(session: Session, cfg: TdprpConfig, epochs: list[RawEpoch], fis_cfg: FisRaimConfig):
     """(t, FIS alert, slope alert, residual alert, standard alert) per epoch."""
     est, points = track(session, cfg, epochs)
-    fis = FisRaim()
+    fis = FisRaim(fis_cfg)
     rows = _raim_rows(session, cfg, epochs, points, fis)
     return rows, est, fis
 
@@ -325,19 +327,22 @@ def main() -> int:
         f"sigma) and standard code RAIM (sigma {CODE_SIGMA_M} m); fault on {victim} from "
         f"t = {FAULT_START_S:.0f} s; alert counts and first alerts from t = 30 s on"
     )
-    for cfg_name, cfg in (
-        ("every frequency", variants[3][1]),
-        ("every frequency, epoch-to-epoch slip test", variants[4][1]),
+    recompute = FisRaimConfig(recompute_window=True)
+    for cfg_name, cfg, fis_cfg in (
+        ("every frequency", variants[3][1], FisRaimConfig()),
+        ("every frequency, epoch-to-epoch slip test", variants[4][1], FisRaimConfig()),
+        ("every frequency, window recomputed at a set change", variants[3][1], recompute),
+        ("every frequency, slip test, window recomputed", variants[4][1], recompute),
     ):
         print(f"\n{cfg_name}")
         print(
             f"{'run':18s} {'FIS alerts':>10s} {'FIS first (s after start)':>26s} "
             f"{'slope/resid':>12s} {'std alerts':>10s} {'std first':>10s} "
-            f"{'unavail':>7s} {'restarts':>8s}"
+            f"{'unavail':>7s} {'restarts':>8s} {'no slope':>8s}"
         )
         excluded_runs = {}
         for name, eps in runs.items():
-            rows, est, fis = raim_run(session, cfg, eps)
+            rows, est, fis = raim_run(session, cfg, eps, fis_cfg)
             excluded_runs[name] = {k: v for k, v in est.excluded.items() if k[:2] == victim}
             gone = next((t for t, keys in fis_keys(session, cfg, eps) if victim not in keys), None)
             if gone is not None:
@@ -356,7 +361,8 @@ def main() -> int:
             print(
                 f"{name:18s} {n_fis:10d} {fmt(fis_first):>26s} "
                 f"{fmt(slope_first) + '/' + fmt(resid_first):>12s} {n_std:10d} "
-                f"{fmt(std_first):>10s} {fis.unavailable:7d} {fis.restarts:8d}{extra}"
+                f"{fmt(std_first):>10s} {fis.unavailable:7d} {fis.restarts:8d} "
+                f"{fis.slope_waiting:8d}{extra}"
             )
         for name, ex in excluded_runs.items():
             print(f"{name}: signals of {victim} excluded by the slip tests: {ex or 'none'}")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2
@@ -41,6 +41,10 @@ class FisRaimConfig:
     residual_sigma_m: float = 0.30
     residual_prob: float = 0.95
     min_points: int = 8
+    recompute_window: bool = False
+    """At a change of the signal set, solve the window's past epochs again with the
+    signals left instead of starting the window again: no blind time for the slope
+    test, but on the walk it trips where the walking starts (docs/raw.md)."""
     phase_sigma_m: float = 0.05
     """σ of one signal's time-differenced carrier at unit weight (zenith): the walk's
     a-posteriori σ while walking is 5-7 cm (0.7 cm standing), multipath of a handheld
@@ -111,6 +115,7 @@ class FisRaim:
 
     def __post_init__(self) -> None:
         self._series: deque[tuple[float, float]] = deque()
+        self._points: deque[TrackPoint] = deque()
         self._limits: dict[int, float] = {}
         self._keys: tuple[tuple[str, int, str], ...] = ()
         self._since_s = math.inf
@@ -118,6 +123,8 @@ class FisRaim:
         """Windows started again because the set of signals changed."""
         self.unavailable = 0
         """Epochs without a test: a subset's predicted separation σ too large."""
+        self.slope_waiting = 0
+        """Available epochs without the slope test: its window not yet full again."""
 
     def update(self, point: TrackPoint) -> FisRaimResult | None:
         """Add one epoch; None while fewer than five satellites leave no separation."""
@@ -125,24 +132,31 @@ class FisRaim:
         if point.keys != self._keys:
             if self._keys:
                 self.restarts += 1
-            self._series.clear()
+            if cfg.recompute_window:
+                self._recompute(point.keys)
+            else:
+                self._clear()
             self._keys = point.keys
         geo = subset_geometry(point)
         if not geo:
-            self._series.clear()
+            self._clear()
             return None
         sep = max(d for d, _ in geo.values())
         sigma = cfg.phase_sigma_m * max(a for _, a in geo.values())
         if sigma > cfg.residual_sigma_m:
             self.unavailable += 1
-            self._series.clear()
+            self._clear()
             return FisRaimResult(point.t_s, sep, 0.0, 0.0, math.inf, False, False, False, sigma)
         if not self._series:
             self._since_s = point.t_s
         self._series.append((point.t_s, sep))
+        self._points.append(point)
         while self._series and self._series[0][0] < point.t_s - cfg.window_s:
             self._series.popleft()
+            self._points.popleft()
         m = len(self._series)
+        full = point.t_s - self._since_s >= cfg.window_s
+        self.slope_waiting += not full
         if m < cfg.min_points:
             return FisRaimResult(point.t_s, sep, 0.0, 0.0, math.inf, False, False, True, sigma)
         t = np.array([p[0] for p in self._series])
@@ -155,7 +169,6 @@ class FisRaim:
             lim = cfg.residual_sigma_m**2 * float(chi2.ppf(cfg.residual_prob, m - 2))
             self._limits[m] = lim
         slope = float(coef[0])
-        full = point.t_s - self._since_s >= cfg.window_s
         return FisRaimResult(
             point.t_s,
             sep,
@@ -167,6 +180,46 @@ class FisRaim:
             True,
             sigma,
         )
+
+    def _clear(self) -> None:
+        self._series.clear()
+        self._points.clear()
+
+    def _recompute(self, keys: tuple[tuple[str, int, str], ...]) -> None:
+        """The window's separations again, each past epoch solved with ``keys`` only."""
+        series: deque[tuple[float, float]] = deque()
+        points: deque[TrackPoint] = deque()
+        for p in self._points:
+            sub = restrict(p, keys)
+            geo = subset_geometry(sub) if sub is not None else {}
+            if sub is not None and geo:
+                series.append((p.t_s, max(d for d, _ in geo.values())))
+                points.append(sub)
+        self._series, self._points = series, points
+        if series:
+            self._since_s = max(self._since_s, series[0][0])
+
+
+def restrict(point: TrackPoint, keys: tuple[tuple[str, int, str], ...]) -> TrackPoint | None:
+    """The epoch's linear system with only the rows of ``keys`` (None if one is missing).
+
+    A separation does not depend on the point the system was linearised about (both
+    solutions move with it), so a past epoch restricted to today's signals gives the
+    separation today's set would have had then.
+    """
+    index = {k: i for i, k in enumerate(point.keys)}
+    if any(k not in index for k in keys):
+        return None
+    rows = np.array([index[k] for k in keys], dtype=int)
+    return replace(
+        point,
+        keys=keys,
+        g_enu=point.g_enu[rows],
+        y_m=point.y_m[rows],
+        w=point.w[rows],
+        residual_m=point.residual_m[rows],
+        iono_change_m=point.iono_change_m[rows],
+    )
 
 
 def chi2_raim(

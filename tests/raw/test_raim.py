@@ -9,7 +9,7 @@ import numpy as np
 
 from companion.raw.faults import dither, inject, ramp
 from companion.raw.obs import ALL_BANDS
-from companion.raw.raim import FisRaim, FisRaimConfig, subset_geometry
+from companion.raw.raim import FisRaim, FisRaimConfig, restrict, subset_geometry
 from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint, wls
 from tests.raw.helpers import walk
 
@@ -113,3 +113,34 @@ def test_fis_raim_on_the_real_walk_cut() -> None:
     assert alerts and 0.0 <= alerts[0] < 25.0
     alerts, _ = _walk_run(20.0, dither(1.0, 10.0))
     assert alerts and 0.0 <= alerts[0] < 10.0
+
+
+def test_restricted_epoch_is_the_system_without_those_rows() -> None:
+    rng = np.random.default_rng(8)
+    g = _geometry(rng, [0, 60, 120, 180, 240, 300, 30], [85, 40, 30, 50, 20, 35, 15])
+    y, w = rng.normal(size=7), rng.uniform(0.2, 1.0, 7)
+    full = _point(g, y, w)
+    keys = full.keys[:3] + full.keys[4:]
+    sub = restrict(full, keys)
+    assert sub is not None and sub.keys == keys
+    rows = np.array([0, 1, 2, 4, 5, 6])
+    direct = subset_geometry(_point(g[rows], y[rows], w[rows]))
+    mine = subset_geometry(sub)
+    # the same six satellites, named by position in ``direct`` (GPS 1-6), by origin here
+    assert [k[1] for k in mine] == [1, 2, 3, 5, 6, 7]
+    assert np.allclose([direct[k] for k in sorted(direct)], [mine[k] for k in sorted(mine)])
+    assert restrict(sub, full.keys) is None  # a signal gone from the epoch
+
+
+def test_recomputed_window_keeps_the_slope_test_armed() -> None:
+    """With ``recompute_window`` a set change does not blind the slope test."""
+    rng = np.random.default_rng(4)
+    g = _geometry(rng, [0, 60, 120, 180, 240, 300, 30, 200], [85, 40, 30, 50, 20, 35, 15, 65])
+    fis = {r: FisRaim(FisRaimConfig(recompute_window=r)) for r in (False, True)}
+    for k in range(80):
+        n = 8 if k < 50 else 7
+        y = rng.normal(0.0, 0.005, n)
+        for f in fis.values():
+            f.update(_point(g[:n], y, np.ones(n), t_s=0.25 * k))
+    assert fis[True].restarts == fis[False].restarts == 1
+    assert fis[False].slope_waiting == 40 + 30 and fis[True].slope_waiting == 40
