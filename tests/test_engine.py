@@ -64,8 +64,26 @@ def test_publishes_each_fused_fix_at_once():
     assert fixes > 90 and published_at_fix == fixes
 
 
+@pytest.mark.parametrize("gnss_hz", [5.0, 10.0])
+def test_a_slower_receiver_is_published_on_each_fix_and_between_at_the_rate(gnss_hz):
+    engine = Engine()
+    times, at_fix, fixes = [], 0, 0
+    for sample in line_stream(20.0, gnss_hz=gnss_hz):
+        outs = solutions(engine.handle(sample))
+        times += [o.t_s for o in outs]
+        if type(sample).__name__ == "GnssFix" and sample.t_s > 11.0:
+            fixes += 1
+            at_fix += bool(outs)
+    assert at_fix == fixes > 4 * gnss_hz
+    gaps = np.diff([t for t in times if t > 11.0])
+    # 10 Hz either way: a 5 Hz receiver's fixes and a prediction half-way between
+    assert np.allclose(gaps, 0.1, atol=1e-6)
+
+
 def test_on_the_tick_without_publish_on_fix():
-    _, outs = run(line_stream(30.0, gaps=((10.0, 20.0),)), Engine(EngineConfig(publish_on_fix=False)))
+    _, outs = run(
+        line_stream(30.0, gaps=((10.0, 20.0),)), Engine(EngineConfig(publish_on_fix=False))
+    )
     times = np.array([s.t_s for s in solutions(outs)])
     assert len(times) == pytest.approx(300, abs=2)
     assert np.diff(times).max() <= 0.1 + 1e-9

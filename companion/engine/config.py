@@ -25,9 +25,11 @@ class EngineConfig:
     publish_on_fix: bool = True
     """Publish as soon as a fix has been fused (the GPS_INPUT built on it leaves within the
     service's own processing time of the fix's arrival), not at the next tick of
-    ``publish_rate_hz``. Between fixes a publication is due ``1.5`` fix intervals after
-    the last one (at most ``0.2`` s: ArduPilot counts a GPS as unhealthy when no message
-    comes for 245 ms), then every ``1/publish_rate_hz`` until a fix is fused again."""
+    ``publish_rate_hz``. While no fix is fused (a gap, or between the fixes of a receiver
+    slower than ``publish_rate_hz``) every ``1/publish_rate_hz``; a fix expected within
+    half a period is waited for until it is half a fix interval late, at most ``0.2`` s
+    after the last publication (ArduPilot counts a GPS unhealthy when no message comes
+    for 245 ms)."""
     min_publish_interval_s: float = ranged(0.08, ge=0.0, le=0.2)
     """With ``publish_on_fix``, two publications are never closer than this (autopilot
     clock): ArduPilot's EKF takes a GPS message only more than 70 ms after the last one it

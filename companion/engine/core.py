@@ -18,9 +18,10 @@ What it does with a sample:
   (:mod:`companion.engine.publish`): the solution with that fix in it leaves at once,
   not at the next tick. Publications are at least ``min_publish_interval_s`` apart
   (ArduPilot's EKF drops a GPS message closer than 70 ms to the last one it took);
-  while no fix is fused (GNSS silent, rejected, or a slow receiver) the next is due
-  1.5 fix intervals after the last (at most :data:`MAX_HOLD_S`), then every
-  ``1/publish_rate_hz``, clocked by the IMU/attitude stream. Without
+  while no fix is fused (GNSS silent, rejected, or a receiver slower than
+  ``publish_rate_hz``) every ``1/publish_rate_hz``, clocked by the IMU/attitude
+  stream, except that a fix expected soon is waited for half its interval (at most
+  :data:`MAX_HOLD_S` after the last publication). Without
   ``publish_on_fix``, whenever ``now_s`` crosses a tick of ``publish_rate_hz``.
 
 Its collaborators: :mod:`companion.engine.navigators` (which navigator carries
@@ -83,8 +84,8 @@ MAX_HOLD_S = 0.2
 """With ``publish_on_fix``, the longest wait for the next fix before a publication
 without one (s): ArduPilot asks for GPS at 5 Hz at least (AP_GPS's GPS_MAX_DELTA_MS is
 200 ms and a 45 ms margin)."""
-HOLD_FIX_INTERVALS = 1.5
-"""... and the wait in fix intervals: a fix a little late is still published on arrival."""
+LATE_FIX_INTERVALS = 0.5
+"""... and how late (in fix intervals) an expected fix is waited for before it."""
 _DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
 """Samples whose absence for ``silence_timeout_s`` is a silence (:mod:`.silence`)."""
 
@@ -193,6 +194,8 @@ class Engine:
         """Autopilot time of the last publication (``publish_on_fix``)."""
         self._publish_due_s = -math.inf
         """When the next publication without a new fix is due (``publish_on_fix``)."""
+        self._next_fix_s = -math.inf
+        """When the next fix is expected (autopilot clock, ``publish_on_fix``)."""
         self._yaw_rad: float | None = None
         """The autopilot's latest heading (ATTITUDE), uncorrected."""
         self._attitude: AttitudeSample | None = None
@@ -605,16 +608,23 @@ class Engine:
         return self.bridge.carry(state, t_s, self.outage.mode, navigator is navs.fallback)
 
     def _publish_on_fix(self, now_s: float) -> list[Output]:
-        """A publication at ``now_s`` (``publish_on_fix``): the next one without a new fix
-        is due a held wait after it when it carries one (a late fix is still published on
-        arrival), else one period of ``publish_rate_hz``."""
+        """A publication at ``now_s`` (``publish_on_fix``) and when the next one is due if
+        no fix is fused meanwhile: a period of ``publish_rate_hz`` later, unless that
+        falls within half a period of the next fix expected (the last fused one and the
+        median fix interval): then half a fix interval after the expected fix, so that a
+        fix a little late is still published on arrival, not held back by the minimum
+        interval behind a publication just before it. Never more than :data:`MAX_HOLD_S`."""
         period_s = 1.0 / self._publish_rate_hz
+        interval_s = self.outage.median_fix_interval_s  # 0 until known: the longest wait
         if self._fix_fused:
-            interval_s = self.outage.median_fix_interval_s  # 0 until known: the longest wait
-            hold_s = HOLD_FIX_INTERVALS * interval_s if interval_s > 0.0 else MAX_HOLD_S
-            period_s = min(max(hold_s, period_s), MAX_HOLD_S)
-        self._fix_fused = False
-        self._publish_due_s = now_s + period_s
+            self._next_fix_s = now_s + interval_s
+            self._fix_fused = False
+        due_s = now_s + period_s
+        expected_s = self._next_fix_s
+        if expected_s >= now_s and due_s > expected_s - 0.5 * period_s:
+            late_s = LATE_FIX_INTERVALS * interval_s if interval_s > 0.0 else MAX_HOLD_S
+            due_s = expected_s + late_s
+        self._publish_due_s = min(due_s, now_s + MAX_HOLD_S)
         return self._publish(now_s)
 
     def _publish(self, now_s: float) -> list[Output]:
