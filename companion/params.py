@@ -105,6 +105,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SR_GLOBAL_POS", "streams.global_position_int_hz"),
     # [engine]
     ("ENG_PUB_RATE", "engine.publish_rate_hz"),
+    ("ENG_PUB_ON_FIX", "engine.publish_on_fix"),
+    ("ENG_PUB_MIN_INT", "engine.min_publish_interval_s"),
     ("ENG_STATUS_RATE", "engine.status_rate_hz"),
     ("ENG_REANCHOR", "engine.reanchor_distance_m"),
     ("ENG_NAVIGATOR", "engine.navigator"),

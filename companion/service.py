@@ -120,6 +120,30 @@ def _write_json(path: Path, value: object, what: str, indent: int | None = None)
     return True
 
 
+WRITE_MAX_BYTES = 1400
+"""Frames are sent together up to this many bytes a write (below the Ethernet MTU: a
+UDP datagram that is never fragmented)."""
+
+
+def _pack_writes(frames: list[bytes]) -> list[bytes]:
+    """``frames`` joined into writes of at most :data:`WRITE_MAX_BYTES` (a longer frame
+    alone), in order."""
+    if len(frames) == 1:
+        return frames
+    writes: list[bytes] = []
+    batch: list[bytes] = []
+    size = 0
+    for frame in frames:
+        if batch and size + len(frame) > WRITE_MAX_BYTES:
+            writes.append(b"".join(batch))
+            batch, size = [], 0
+        batch.append(frame)
+        size += len(frame)
+    if batch:
+        writes.append(b"".join(batch))
+    return writes
+
+
 class Service:
     """Run the pipeline on live links until stopped."""
 
@@ -363,33 +387,57 @@ class Service:
                 parser.bad_frames - bad_before,
                 parser.bad_bytes - bad_bytes_before,
             )
-        decoder = self.pipeline.decoder
+        pipeline = self.pipeline
+        decoder = pipeline.decoder
+        engine = pipeline.engine
+        recorder = self.recorder
+        out: list[bytes] = []
         for msg in messages:
-            if self.recorder is not None:
-                self.recorder.record(t_rx_s, bytes(msg.get_msgbuf()))
+            if recorder is not None:
+                recorder.record(t_rx_s, bytes(msg.get_msgbuf()))
             beats = decoder.autopilot_heartbeats
-            frames = self.pipeline.on_message(msg, t_rx_s)
+            frames = pipeline.on_message(msg, t_rx_s)
             if watch is not None and decoder.autopilot_heartbeats != beats:
                 line = watch.heartbeat(t_rx_s)
                 if line:
                     log.info("%s", line)
             if frames:
-                await self._send(frames, t_rx_s)
-            if self.pipeline.engine.state_changes != self._saved_changes:
-                self._saved_changes = self.pipeline.engine.state_changes
+                if recorder is not None:
+                    for frame in frames:
+                        recorder.record(t_rx_s, frame)
+                out += frames
+            if engine.state_changes != self._saved_changes:
+                self._saved_changes = engine.state_changes
                 self._save_state()
-            if self.pipeline.params.changes != self._saved_params:
-                self._saved_params = self.pipeline.params.changes
+            if pipeline.params.changes != self._saved_params:
+                self._saved_params = pipeline.params.changes
                 self._save_params()
+        if out:  # what one read made, in one write per link
+            await self._send_links(out, t_rx_s)
 
     async def _send(self, frames: list[bytes], t_s: float) -> None:
-        now = timestamp_at(t_s) if self.signing else 0
-        for frame in frames:
-            if self.recorder is not None:
+        """Record ``frames`` and send them on every open link."""
+        if self.recorder is not None:
+            for frame in frames:
                 self.recorder.record(t_s, frame)
-            for name, link in list(self._links.items()):
-                signing = self.signing.get(name)
-                await link.send(frame if signing is None else signing.sign(frame, now))
+        await self._send_links(frames, t_s)
+
+    async def _send_links(self, frames: list[bytes], t_s: float) -> None:
+        """``frames`` on every open link, in one write each (one UDP datagram: MAVLink
+        frames follow each other in a datagram as on a byte stream), signed on a link
+        that signs."""
+        now = timestamp_at(t_s) if self.signing else 0
+        plain: list[bytes] | None = None
+        for name, link in list(self._links.items()):
+            signing = self.signing.get(name)
+            if signing is not None:
+                writes = _pack_writes([signing.sign(frame, now) for frame in frames])
+            else:
+                if plain is None:
+                    plain = _pack_writes(frames)
+                writes = plain
+            for data in writes:
+                await link.send(data)
 
     async def _timer(self) -> None:
         """Send the pipeline's periodic output when due, flush the recorder when due and

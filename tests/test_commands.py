@@ -302,8 +302,9 @@ def _truth():
 
 
 def _heading_errors_deg(msgs: list[Any], min_speed_mps: float) -> list[tuple[float, float]]:
-    """(time, published heading - true heading) of the GLOBAL_POSITION_INTs at the
-    truth's 10 Hz instants, on straight taxi (truth turning under 1 deg/s), deg."""
+    """(time, published heading - true heading) of the GLOBAL_POSITION_INTs, the truth
+    (10 Hz) interpolated to their time, on straight taxi (truth turning under 1 deg/s),
+    deg."""
     truth = _truth()
     out = []
     for m in msgs:
@@ -313,11 +314,14 @@ def _heading_errors_deg(msgs: list[Any], min_speed_mps: float) -> list[tuple[flo
             continue
         t = m.time_boot_ms / 1000
         k = int(np.searchsorted(truth["t_s"], t))
-        if not 0 < k < len(truth) or truth["t_s"][k] - t > 1e-6:
+        if not 0 < k < len(truth):
             continue
-        if abs(_wrap_deg(truth["yaw_deg"][k] - truth["yaw_deg"][k - 1])) * 10 > 1.0:
+        t0, t1 = truth["t_s"][k - 1], truth["t_s"][k]
+        turn_deg = _wrap_deg(truth["yaw_deg"][k] - truth["yaw_deg"][k - 1])
+        if abs(turn_deg) / (t1 - t0) > 1.0:
             continue
-        err = _wrap_deg(m.hdg / CDEG_PER_RAD * 180 / math.pi - truth["yaw_deg"][k])
+        yaw_deg = truth["yaw_deg"][k - 1] + turn_deg * (t - t0) / (t1 - t0)
+        err = _wrap_deg(m.hdg / CDEG_PER_RAD * 180 / math.pi - yaw_deg)
         out.append((t, err))
     return out
 

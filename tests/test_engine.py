@@ -42,12 +42,51 @@ def test_publishes_at_the_configured_rate_including_through_a_gap():
     sols = solutions(outs)
     times = np.array([s.t_s for s in sols])
     gaps = np.diff(times)
-    assert len(sols) == pytest.approx(300, abs=2)
-    # publication is clocked by the IMU stream even with no GNSS
-    assert gaps.max() <= 0.1 + 1e-9
+    # on each fused fix (10 Hz); a missing fix is waited for 1.5 fix intervals, then the
+    # IMU stream clocks the publications at publish_rate_hz through the gap
+    assert len(sols) == pytest.approx(300, abs=8)
+    assert gaps.max() <= 0.15 + 1.0 / 50.0 + 1e-9  # and the next IMU sample (50 Hz)
+    assert gaps.min() >= EngineConfig().min_publish_interval_s - 1e-9
     in_gap = [s for s in sols if 21.5 < s.t_s < 29.5]
     assert len(in_gap) >= 75
     assert all(s.mode is NavMode.BRIDGING for s in in_gap)
+
+
+def test_publishes_each_fused_fix_at_once():
+    engine = Engine()
+    published_at_fix = 0
+    fixes = 0
+    for sample in line_stream(20.0):
+        outs = engine.handle(sample)
+        if type(sample).__name__ == "GnssFix" and sample.t_s > 11.0:
+            fixes += 1
+            published_at_fix += bool(solutions(outs))
+    assert fixes > 90 and published_at_fix == fixes
+
+
+@pytest.mark.parametrize("gnss_hz", [5.0, 10.0])
+def test_a_slower_receiver_is_published_on_each_fix_and_between_at_the_rate(gnss_hz):
+    engine = Engine()
+    times, at_fix, fixes = [], 0, 0
+    for sample in line_stream(20.0, gnss_hz=gnss_hz):
+        outs = solutions(engine.handle(sample))
+        times += [o.t_s for o in outs]
+        if type(sample).__name__ == "GnssFix" and sample.t_s > 11.0:
+            fixes += 1
+            at_fix += bool(outs)
+    assert at_fix == fixes > 4 * gnss_hz
+    gaps = np.diff([t for t in times if t > 11.0])
+    # 10 Hz either way: a 5 Hz receiver's fixes and a prediction half-way between
+    assert np.allclose(gaps, 0.1, atol=1e-6)
+
+
+def test_on_the_tick_without_publish_on_fix():
+    _, outs = run(
+        line_stream(30.0, gaps=((10.0, 20.0),)), Engine(EngineConfig(publish_on_fix=False))
+    )
+    times = np.array([s.t_s for s in solutions(outs)])
+    assert len(times) == pytest.approx(300, abs=2)
+    assert np.diff(times).max() <= 0.1 + 1e-9
 
 
 @pytest.mark.parametrize("navigator", ["blend", "passthrough"])
@@ -71,9 +110,10 @@ def test_a_straight_line_is_carried_through_a_gap(navigator):
     else:
         # constant velocity is the exact model of a straight line
         assert late < 0.02
-        # GPS_RAW_INT has no vertical velocity: the first 0.1 s after the first fix
-        # extrapolate with vd = 0 (0.2 m at 2 m/s climb) until height differences give it
-        assert max(e for t, e in errors.items() if t < 10.15) == pytest.approx(0.2, abs=0.01)
+        # GPS_RAW_INT has no vertical velocity, so an extrapolation in the first 0.1 s
+        # after the first fix would use vd = 0 (0.2 m at 2 m/s climb); published on each
+        # fix as it comes, nothing is extrapolated then
+        assert max(e for t, e in errors.items() if t < 10.15) < 1e-3
 
 
 def test_gap_raises_lost_bridging_then_back():

@@ -411,10 +411,15 @@ def run(pipe: Pipeline, records: list[tuple[float, Any]]) -> list[Any]:
 
 
 def test_the_publication_rate_changes_at_once_and_never_stalls():
+    # on the tick of publish_rate_hz (publish_on_fix off): the rate is the configured one
     records = flight(40.0)
     half = len(records) // 2
     for rate_hz in (5.0, 20.0):
-        pipe = Pipeline()
+        config = Config()
+        config = dataclasses.replace(
+            config, engine=dataclasses.replace(config.engine, publish_on_fix=False)
+        )
+        pipe = Pipeline(config)
         before = [m for m in run(pipe, records[:half]) if m.get_type() == "GLOBAL_POSITION_INT"]
         assert set_param(pipe, "ENG_PUB_RATE", rate_hz)[0].param_value == rate_hz
         after = [m for m in run(pipe, records[half:]) if m.get_type() == "GLOBAL_POSITION_INT"]
@@ -541,3 +546,26 @@ def test_optional_hint_is_what_the_table_says():
             obj = getattr(obj, part)
         hint = typing.get_type_hints(type(obj))[p.key]
         assert p.optional == (type(None) in typing.get_args(hint)), p.name
+
+
+def test_publishing_on_fix_can_be_turned_off_and_on_live():
+    records = flight(40.0)
+    third = len(records) // 3
+    pipe = Pipeline()
+
+    def times(part: list[tuple[float, Any]]) -> list[float]:
+        out = run(pipe, part)
+        return [m.time_boot_ms / 1000.0 for m in out if m.get_type() == "GLOBAL_POSITION_INT"]
+
+    on = times(records[:third])
+    assert set_param(pipe, "ENG_PUB_ON_FIX", 0)[0].param_value == 0
+    off = times(records[third : 2 * third])
+    assert set_param(pipe, "ENG_PUB_ON_FIX", 1)[0].param_value == 1
+    on_again = times(records[2 * third :])
+    # on the tick: every publication on a tenth of a second; on fixes: not so
+    assert all(abs(t * 10.0 - round(t * 10.0)) < 1e-6 for t in off[1:])
+    for part in (on[5:], on_again[5:]):
+        assert sum(abs(t * 10.0 - round(t * 10.0)) > 1e-6 for t in part) > len(part) // 2
+    every = on + off + on_again
+    gaps = [b - a for a, b in zip(every, every[1:], strict=False)]
+    assert min(gaps) >= 0.08 - 1e-9 and max(gaps) <= 0.2 + 0.03

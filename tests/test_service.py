@@ -297,3 +297,13 @@ def test_serial_pty_unplug_and_replug(tmp_path):
                 pass
         err = stop_service(proc)
     assert "Traceback" not in err
+
+
+def test_frames_go_out_together_in_writes_below_the_mtu():
+    from companion.service import WRITE_MAX_BYTES, _pack_writes
+
+    frames = [bytes([k]) * 300 for k in range(10)]
+    writes = _pack_writes(frames)
+    assert b"".join(writes) == b"".join(frames)  # in order, nothing lost
+    assert all(len(w) <= WRITE_MAX_BYTES for w in writes) and len(writes) == 3
+    assert _pack_writes([b"x" * 2000]) == [b"x" * 2000]  # a longer frame goes alone

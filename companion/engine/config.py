@@ -19,7 +19,22 @@ class EngineConfig:
     """Publication and frame handling of the engine."""
 
     publish_rate_hz: float = ranged(10.0, gt=0.0, le=50.0)
-    """GLOBAL_POSITION_INT / GPS_INPUT rate on the autopilot clock (5-10 Hz for GPS_INPUT)."""
+    """GLOBAL_POSITION_INT / GPS_INPUT rate on the autopilot clock (5-10 Hz for GPS_INPUT).
+    With ``publish_on_fix``, the rate of the publications made while no fix is fused
+    (holding, bridging, a receiver slower than this)."""
+    publish_on_fix: bool = True
+    """Publish as soon as a fix has been fused (the GPS_INPUT built on it leaves within the
+    service's own processing time of the fix's arrival), not at the next tick of
+    ``publish_rate_hz``. While no fix is fused (a gap, or between the fixes of a receiver
+    slower than ``publish_rate_hz``) every ``1/publish_rate_hz``; a fix expected within
+    half a period is waited for until it is half a fix interval late, at most ``0.2`` s
+    after the last publication (ArduPilot counts a GPS unhealthy when no message comes
+    for 245 ms)."""
+    min_publish_interval_s: float = ranged(0.08, ge=0.0, le=0.2)
+    """With ``publish_on_fix``, two publications are never closer than this (autopilot
+    clock): ArduPilot's EKF takes a GPS message only more than 70 ms after the last one it
+    took, so a closer one would be dropped. A fix fused sooner is published when this has
+    passed."""
     status_rate_hz: float = ranged(1.0, gt=0.0)
     """Rate of the CMP_* NAMED_VALUE_FLOAT status values."""
     reanchor_distance_m: float = ranged(20_000.0, ge=1000.0, finite=False)

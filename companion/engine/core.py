@@ -13,10 +13,16 @@ What it does with a sample:
   converted into the local NED frame and offered to the navigator, which gates
   it against its prediction; the verdict goes back to the outage monitor, the
   fix and the navigator's verdict to the integrity monitor.
-* Whenever ``now_s`` crosses a publication tick (``publish_rate_hz`` on the
-  autopilot clock) the navigator's state is carried to ``now_s`` and published
-  as a :class:`NavSolution` (:mod:`companion.engine.publish`), also while GNSS
-  is silent, then clocked by the IMU/attitude stream.
+* As soon as a fix has been fused (``publish_on_fix``), the navigator's state is
+  carried to ``now_s`` and published as a :class:`NavSolution`
+  (:mod:`companion.engine.publish`): the solution with that fix in it leaves at once,
+  not at the next tick. Publications are at least ``min_publish_interval_s`` apart
+  (ArduPilot's EKF drops a GPS message closer than 70 ms to the last one it took);
+  while no fix is fused (GNSS silent, rejected, or a receiver slower than
+  ``publish_rate_hz``) every ``1/publish_rate_hz``, clocked by the IMU/attitude
+  stream, except that a fix expected soon is waited for half its interval (at most
+  :data:`MAX_HOLD_S` after the last publication). Without
+  ``publish_on_fix``, whenever ``now_s`` crosses a tick of ``publish_rate_hz``.
 
 Its collaborators: :mod:`companion.engine.navigators` (which navigator carries
 the solution), :mod:`companion.engine.bridge` (the potential filter through
@@ -74,6 +80,12 @@ OUTAGE_TICK_S = 0.05
 """Outage-clock resolution (s): GNSS_LOST is raised within this of its timeout."""
 DUE_EPS_S = 1e-6
 """:meth:`Engine.next_due_s` is this after a strict timeout (``> gnss_timeout_s``)."""
+MAX_HOLD_S = 0.2
+"""With ``publish_on_fix``, the longest wait for the next fix before a publication
+without one (s): ArduPilot asks for GPS at 5 Hz at least (AP_GPS's GPS_MAX_DELTA_MS is
+200 ms and a 45 ms margin)."""
+LATE_FIX_INTERVALS = 0.5
+"""... and how late (in fix intervals) an expected fix is waited for before it."""
 _DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
 """Samples whose absence for ``silence_timeout_s`` is a silence (:mod:`.silence`)."""
 
@@ -91,7 +103,14 @@ _HEADING_CODES = frozenset(
 
 LIVE_KEYS: dict[str, frozenset[str]] = {
     "engine": frozenset(
-        {"publish_rate_hz", "status_rate_hz", "reanchor_distance_m", "primary_receiver"}
+        {
+            "publish_rate_hz",
+            "publish_on_fix",
+            "min_publish_interval_s",
+            "status_rate_hz",
+            "reanchor_distance_m",
+            "primary_receiver",
+        }
     ),
     "outage": frozenset(f.name for f in dataclasses.fields(OutageConfig)),
     "heading": frozenset({"auto_apply", "publish_period_s"}),
@@ -171,6 +190,12 @@ class Engine:
         self._airborne = False
         self.now_s: float | None = None
         self._publish_tick = -1
+        self._last_publish_s = -math.inf
+        """Autopilot time of the last publication (``publish_on_fix``)."""
+        self._publish_due_s = -math.inf
+        """When the next publication without a new fix is due (``publish_on_fix``)."""
+        self._next_fix_s = -math.inf
+        """When the next fix is expected (autopilot clock, ``publish_on_fix``)."""
         self._yaw_rad: float | None = None
         """The autopilot's latest heading (ATTITUDE), uncorrected."""
         self._attitude: AttitudeSample | None = None
@@ -200,6 +225,8 @@ class Engine:
         self._rx_last_usable_t_s: dict[int, float] = {}
         self.frame: LocalFrame | None = None
         self._next_outage_tick_s = -math.inf
+        self._fix_fused = False
+        """A fix was fused since the last publication (``publish_on_fix``)."""
 
     # ------------------------------------------------------------------ entry point
 
@@ -237,10 +264,19 @@ class Engine:
             if now >= self._next_outage_tick_s:
                 self._next_outage_tick_s = now + OUTAGE_TICK_S
                 outputs += self.outage.tick(now)
-            tick = math.floor(now * self._publish_rate_hz + 1e-6)
-            if tick > self._publish_tick:
-                self._publish_tick = tick
-                outputs += self._publish(now)
+            if self.config.publish_on_fix:
+                last_s = self._last_publish_s  # due times to within 1 us (0.1 is not binary)
+                if (
+                    now > last_s
+                    and now >= last_s + self.config.min_publish_interval_s - DUE_EPS_S
+                    and (self._fix_fused or now >= self._publish_due_s - DUE_EPS_S)
+                ):
+                    outputs += self._publish_on_fix(now)
+            else:
+                tick = math.floor(now * self._publish_rate_hz + 1e-6)
+                if tick > self._publish_tick:
+                    self._publish_tick = tick
+                    outputs += self._publish(now)
         if watch.waiting:
             if self.outage.mode is not NavMode.INIT:
                 outputs += watch.navigating(now)
@@ -430,6 +466,7 @@ class Engine:
                 if not vouched:  # its height failed: beyond what its own evidence covers
                     self.outage.rejection_unvouched(rid)
         if update.fused:
+            self._fix_fused = True
             self.stats.gnss["fused_vouched" if vouched else "fused"] += 1
             if not vouched:
                 self.outage.used(fix)
@@ -459,6 +496,7 @@ class Engine:
         self.outage.used(fix)
         self.stats.gnss["reinitialised"] += 1
         self.publisher.last_fused_fix = fix
+        self._fix_fused = True
         return list(self.outage.reinitialised(fix.t_s))
 
     def _fuse_receiver(self, fix: GnssFix) -> bool:
@@ -505,6 +543,9 @@ class Engine:
                 self._publish_rate_hz = config.publish_rate_hz
                 now = self.now_s
                 self._publish_tick = -1 if now is None else tick(now, config.publish_rate_hz)
+                self._publish_due_s = min(
+                    self._publish_due_s, self._last_publish_s + 1.0 / config.publish_rate_hz
+                )
             if "status_rate_hz" in changed:
                 self.publisher.set_status_rate(config.status_rate_hz, self.now_s)
         elif isinstance(config, OutageConfig):
@@ -566,7 +607,28 @@ class Engine:
             return None
         return self.bridge.carry(state, t_s, self.outage.mode, navigator is navs.fallback)
 
+    def _publish_on_fix(self, now_s: float) -> list[Output]:
+        """A publication at ``now_s`` (``publish_on_fix``) and when the next one is due if
+        no fix is fused meanwhile: a period of ``publish_rate_hz`` later, unless that
+        falls within half a period of the next fix expected (the last fused one and the
+        median fix interval): then half a fix interval after the expected fix, so that a
+        fix a little late is still published on arrival, not held back by the minimum
+        interval behind a publication just before it. Never more than :data:`MAX_HOLD_S`."""
+        period_s = 1.0 / self._publish_rate_hz
+        interval_s = self.outage.median_fix_interval_s  # 0 until known: the longest wait
+        if self._fix_fused:
+            self._next_fix_s = now_s + interval_s
+            self._fix_fused = False
+        due_s = now_s + period_s
+        expected_s = self._next_fix_s
+        if expected_s >= now_s and due_s > expected_s - 0.5 * period_s:
+            late_s = LATE_FIX_INTERVALS * interval_s if interval_s > 0.0 else MAX_HOLD_S
+            due_s = expected_s + late_s
+        self._publish_due_s = min(due_s, now_s + MAX_HOLD_S)
+        return self._publish(now_s)
+
     def _publish(self, now_s: float) -> list[Output]:
+        self._last_publish_s = now_s
         t_s = publication_time_s(now_s)
         self.navigators.select(self.now_s)
         state = self._state_now(t_s)

@@ -289,7 +289,7 @@ class _DatagramQueue(asyncio.DatagramProtocol):
         logger.debug("%s: %s", self._link.url, exc)
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self._link._queue.put_nowait(None)
+        self._link._wake()
 
 
 class UdpLink(Link):
@@ -303,6 +303,11 @@ class UdpLink(Link):
         divert what is sent.
     last_sender : Any
         ``udpin``: the sender of the chunk :meth:`recv` returned last.
+
+    The datagrams waiting when :meth:`recv` is called are returned together (joined, as
+    a stream link would deliver them), those of one sender at a time: one wake-up of the
+    reader for all of them. They wait in a deque with one waiter, not an
+    ``asyncio.Queue``: the live path's cost is per datagram.
     """
 
     def __init__(self, url: str, listen: bool, host: str, port: int) -> None:
@@ -310,10 +315,10 @@ class UdpLink(Link):
         self.listen = listen
         self.reply_to_any_sender = True
         self.last_sender: Any = None
-        self._senders: collections.deque[Any] = collections.deque()
         self._addr = (host, port)
         self._peer: Any = None if listen else (host, port)
-        self._queue: asyncio.Queue[bytes | None] = asyncio.Queue()
+        self._datagrams: collections.deque[tuple[bytes, Any]] = collections.deque()
+        self._waiter: asyncio.Future[None] | None = None
         self._transport: asyncio.DatagramTransport | None = None
 
     async def _open(self) -> None:
@@ -339,16 +344,37 @@ class UdpLink(Link):
         return int(self._transport.get_extra_info("sockname")[1])
 
     def _on_datagram(self, data: bytes, addr: Any) -> None:
-        if self.listen:
-            if self.reply_to_any_sender:
-                self._peer = addr
-            self._senders.append(addr)
-        self._queue.put_nowait(data)
+        if self.listen and self.reply_to_any_sender:
+            self._peer = addr
+        self._datagrams.append((data, addr))
+        self._wake()
+
+    def _wake(self) -> None:
+        waiter = self._waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(None)
 
     async def recv(self) -> bytes:
-        data = await self._recv_queued(self._queue)
-        if self.listen and self._senders:
-            self.last_sender = self._senders.popleft()
+        datagrams = self._datagrams
+        while not datagrams:
+            if self._closed:
+                raise LinkError(f"{self.url}: closed")
+            waiter = self._waiter = asyncio.get_running_loop().create_future()
+            try:
+                await waiter
+            finally:
+                self._waiter = None
+        if self._closed:
+            raise LinkError(f"{self.url}: closed")
+        data, sender = datagrams.popleft()
+        if datagrams and datagrams[0][1] == sender:  # more from the same sender: together
+            chunks = [data]
+            while datagrams and datagrams[0][1] == sender:
+                chunks.append(datagrams.popleft()[0])
+            data = b"".join(chunks)
+        if self.listen:
+            self.last_sender = sender
+        self.bytes_in += len(data)
         return data
 
     def adopt_sender(self) -> None:
@@ -374,7 +400,7 @@ class UdpLink(Link):
             self._closed = True
             if self._transport is not None:
                 self._transport.close()
-            self._queue.put_nowait(None)
+            self._wake()
 
 
 # ---------------------------------------------------------------------- TCP

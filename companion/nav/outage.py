@@ -364,6 +364,11 @@ class OutageMonitor:
         self._median_fix_interval_s = statistics.median(self._fix_intervals_s)
 
     @property
+    def median_fix_interval_s(self) -> float:
+        """Median interval between the last fused fixes (s; 0 until two were fused)."""
+        return self._median_fix_interval_s
+
+    @property
     def timeout_s(self) -> float:
         """The GNSS timeout in force: ``gnss_timeout_s``, or longer for a slow receiver
         (``timeout_fix_intervals`` of its median fix interval)."""

@@ -112,6 +112,30 @@ def test_udp_in_out_round_trip() -> None:
     run(main())
 
 
+def test_udp_datagrams_waiting_come_together_one_sender_at_a_time() -> None:
+    async def main() -> None:
+        server = await open_link("udpin:127.0.0.1:0")
+        assert isinstance(server, UdpLink)
+        a = await open_link(f"udpout:127.0.0.1:{server.local_port}")
+        b = await open_link(f"udpout:127.0.0.1:{server.local_port}")
+        for link, data in ((a, b"a1"), (a, b"a2"), (b, b"b1"), (a, b"a3")):
+            await link.send(data)
+        await asyncio.sleep(0.2)  # all four waiting before the first recv
+        chunks = []
+        while sum(len(c) for c in chunks) < 8:
+            chunks.append(await asyncio.wait_for(server.recv(), TIMEOUT_S))
+            if chunks[-1] == b"b1":
+                sender_b = server.last_sender
+            else:
+                sender_a = server.last_sender
+        assert chunks == [b"a1a2", b"b1", b"a3"]
+        assert sender_a != sender_b and server.bytes_in == 8
+        for link in (a, b, server):
+            await link.close()
+
+    run(main())
+
+
 def test_tcp_client_server_round_trip_and_broadcast() -> None:
     async def main() -> None:
         srv = await open_link("tcpin:127.0.0.1:0")
