@@ -225,6 +225,7 @@ def _cmd_console(args: argparse.Namespace) -> int:
         station=args.station,
         web_port=args.web,
         web_url=args.web_url,
+        tracker_out=args.tracker_out,
     )
 
 
@@ -345,6 +346,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--station",
         help="ground station LAT,LON,ALT (deg, deg, m MSL): track the aircraft in az/el/range",
+    )
+    p.add_argument(
+        "--tracker-out",
+        metavar="URL",
+        help="with --station: send the predicted position to an antenna tracker's link "
+        "(GLOBAL_POSITION_INT, e.g. udpout:192.168.1.20:14555)",
     )
     p.add_argument("--web", type=int, metavar="PORT", help="serve the console to a browser")
     p.add_argument(

@@ -89,6 +89,32 @@ def test_console_tracks_from_a_station(tmp_path):
     assert later["predicted_s"] > 4.5
     assert later["pointing_sigma_deg"] > snap["track"]["pointing_sigma_deg"]
 
+    # the prediction for an antenna tracker: the aircraft's GLOBAL_POSITION_INT and HEARTBEAT
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+
+    from companion.console.antenna import MAX_PREDICTION_S, AntennaFeed
+
+    assert state.aircraft_system == 1 and state.aircraft_type is not None
+    feed = AntennaFeed(station)
+    est = state.track_estimate(t + 3.0)
+    frames = feed.frames(t + 3.0, est, state.aircraft_system, state.aircraft_type)
+    decoder = apm.MAVLink(None)
+    msgs = [decoder.decode(bytearray(f)) for f in frames]
+    assert [m.get_type() for m in msgs] == ["HEARTBEAT", "GLOBAL_POSITION_INT"]
+    assert all(m.get_srcSystem() == 1 for m in msgs) and msgs[0].type == state.aircraft_type
+    gpi = msgs[1]
+    back = station.lla_to_ned(
+        math.radians(gpi.lat / 1e7), math.radians(gpi.lon / 1e7), gpi.alt / 1e3
+    )
+    assert float(((back - est.pos_ned_m) ** 2).sum() ** 0.5) < 0.05  # 1e-7 deg, mm
+    assert gpi.time_boot_ms == int(est.t_s * 1000.0)
+    speed = math.hypot(gpi.vx, gpi.vy) / 100.0
+    assert abs(speed - math.hypot(*est.vel_ned_mps[:2])) < 0.02 and speed > 20.0
+    # the heartbeat once a second; nothing once the prediction has gone on too long
+    assert len(feed.frames(t + 3.1, est, 1, state.aircraft_type)) == 1
+    assert feed.frames(t + 3.2, state.track_estimate(t + MAX_PREDICTION_S + 1.0), 1, 1) == []
+    assert feed.frames(t + 3.2, None, 1, 1) == [] and feed.frames(t + 3.2, est, None, 1) == []
+
 
 def test_console_json_returns_within_duration_when_nothing_is_heard():
     import json

@@ -181,3 +181,84 @@ def test_console_app_draws_with_nothing_heard():
         asyncio.run(scenario())
         assert (Path(tmp) / "empty.svg").stat().st_size > 0
     assert app.return_code in (None, 0)
+
+
+def test_console_forwards_the_prediction_to_an_antenna_tracker():
+    """``--tracker-out``: the console sends its tracking channel's position to an antenna
+    tracker's link as the aircraft's GLOBAL_POSITION_INT, and keeps sending it (predicted)
+    when the positions stop."""
+    import math
+    import socket
+
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+
+    from companion.console.main import parse_station
+
+    lat0, lon0, alt0 = 52.0, 21.0, 100.0
+    station = parse_station(f"{lat0},{lon0},{alt0}")
+    console_port = free_udp_port()
+    antenna = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    antenna.bind(("127.0.0.1", 0))
+    antenna.settimeout(0.05)
+    app = ConsoleApp(
+        f"udpin:127.0.0.1:{console_port}",
+        ConsoleModel(station=station),
+        tracker_out=f"udpout:127.0.0.1:{antenna.getsockname()[1]}",
+    )
+    service = apm.MAVLink(None, srcSystem=1, srcComponent=191)
+    autopilot = apm.MAVLink(None, srcSystem=1, srcComponent=1)
+    out = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    t0 = time.time()
+    heard: list = []
+    decoder = apm.MAVLink(None)
+    decoder.robust_parsing = True
+
+    def drain() -> None:
+        try:
+            while True:
+                data = antenna.recv(4096)
+                heard.extend(m for m in decoder.parse_buffer(data) or [])
+        except (TimeoutError, BlockingIOError):
+            pass
+
+    def position_at(t: float) -> tuple[float, float]:
+        # 2 km north of the station, flying east at 30 m/s
+        return lat0 + 2000.0 / 111_200.0, lon0 + 30.0 * t / (111_200.0 * math.cos(math.radians(52)))
+
+    async def scenario() -> None:
+        async with app.run_test(size=(160, 50)) as pilot:
+            for k in range(40):  # 8 s at 5 Hz
+                t = time.time() - t0
+                lat, lon = position_at(t)
+                gpi = service.global_position_int_encode(
+                    int(t * 1000), round(lat * 1e7), round(lon * 1e7), 400_000, 300_000,
+                    0, 3000, 0, 9000,
+                )  # fmt: skip
+                out.sendto(gpi.pack(service), ("127.0.0.1", console_port))
+                if k % 5 == 0:
+                    hb = autopilot.heartbeat_encode(1, 3, 0, 0, 4)
+                    out.sendto(hb.pack(autopilot), ("127.0.0.1", console_port))
+                await pilot.pause(0.2)
+                drain()
+            n_heard = len(heard)
+            await pilot.pause(2.0)  # the positions stop: the prediction goes on
+            drain()
+            assert len(heard) > n_heard + 10
+            assert "antenna:" in text_of(app, "#track")
+
+    try:
+        asyncio.run(scenario())
+    finally:
+        antenna.close()
+        out.close()
+    gpis = [m for m in heard if m.get_type() == "GLOBAL_POSITION_INT"]
+    assert gpis and all(m.get_srcSystem() == 1 for m in heard)
+    assert any(m.get_type() == "HEARTBEAT" and m.type == 1 for m in heard)
+    last = gpis[-1]
+    lat, lon = position_at(last.time_boot_ms / 1000.0)
+    err_m = math.hypot(
+        (last.lat / 1e7 - lat) * 111_200.0,
+        (last.lon / 1e7 - lon) * 111_200.0 * math.cos(math.radians(52)),
+    )
+    assert err_m < 15.0, err_m  # predicted 2 s past the last position, straight flight
+    assert abs(last.vy / 100.0 - 30.0) < 2.0 and abs(last.alt / 1000.0 - 400.0) < 5.0

@@ -10,6 +10,7 @@ import pytest
 
 from companion.nav.tracking import (
     Tracker,
+    TrackerConfig,
     acceleration_ned,
     los_to_ned,
     los_velocity_ned,
@@ -21,6 +22,10 @@ from companion.sim.scenarios import build_script, make_scenario
 from companion.sim.trajectory import gravity_down_mps2
 
 STATION = np.array([-900.0, 1200.0, 0.0])
+WHITE_2M = TrackerConfig(
+    pos_sigma_m=2.0, pos_gm_sigma_m=0.0, f_sigma_mps2=0.05, att_sigma_rad=math.radians(0.3)
+)
+"""The filters told the noise these tests add: 2 m white positions, exact attitude and IMU."""
 
 
 @pytest.fixture(scope="module")
@@ -56,23 +61,33 @@ def test_spherical_rates_match_numerical_derivatives(turn_path):
     assert np.linalg.norm(acc[:2]) > 4.0  # a 30 deg bank: about 0.58 g across the track
 
 
-def _track(path, t0, t1, model, rate_hz=2.0, seed=3, loss=None):
+def _track(
+    path, t0, t1, model, rate_hz=2.0, seed=3, loss=None, cfg=WHITE_2M, f_bias=None, gm_m=0.0
+):
     rng = np.random.default_rng(seed)
-    tracker = Tracker(model)
+    tracker = Tracker(model, cfg)
     t_tel = np.arange(t0, t1, 1.0 / rate_hz)
     st = path.evaluate(t_tel)
     g = gravity_down_mps2(path.frame, st.pos_ned_m)
-    errs, sigmas = [], []
+    errs, sigmas, nees = [], [], []
+    wander = np.zeros(3)
     for i, t in enumerate(t_tel):
         rel = st.pos_ned_m[i] - STATION
         est = tracker.estimate(float(t))  # predicted to the sample, before it is used
         if est is not None and t > t0 + 10.0:
             errs.append(pointing_error_rad(est, rel))
             sigmas.append(est.pointing_sigma_rad)
+            e = est.pos_ned_m - rel
+            nees.append(float(e @ np.linalg.solve(est.pos_cov_m2, e)))
+        if gm_m > 0.0:  # the reported positions' slowly wandering error (tau 30 s)
+            phi = math.exp(-1.0 / (rate_hz * 30.0))
+            wander = phi * wander + rng.normal(0.0, gm_m * math.sqrt(1.0 - phi * phi), 3)
         if loss is not None and loss[0] <= t < loss[1]:
             continue
-        tracker.position(float(t), rel + rng.normal(0.0, 2.0, 3))
-        tracker.acceleration(float(t), acceleration_ned(st.mat_nb[i], st.f_b_mps2[i], g[i]))
+        tracker.position(float(t), rel + wander + rng.normal(0.0, cfg.pos_sigma_m, 3))
+        f_b = st.f_b_mps2[i] if f_bias is None else st.f_b_mps2[i] + f_bias
+        tracker.acceleration(float(t), acceleration_ned(st.mat_nb[i], f_b, g[i]), st.mat_nb[i])
+    tracker.nees = np.array(nees)
     return np.array(errs), np.array(sigmas), tracker
 
 
@@ -91,6 +106,37 @@ def test_s2_tracks_a_banked_turn_better_than_singer_and_cv(turn_path):
         else:
             assert trk.accelerations == 0
     assert rms["dynamic"] < 0.7 * rms["singer"] and rms["singer"] < rms["cv"], rms
+
+
+def test_dynamic_channel_is_consistent_and_learns_its_observation_noise(turn_path):
+    """A body-frame accelerometer bias is estimated through the turn, z2's noise is
+    learnt from its innovations, and the filter's NIS and NEES are those of a
+    consistent filter (3 degrees of freedom) with wandering reported positions."""
+    b, path = turn_path
+    turn = [s for s in b.segments if s.end[1] != 0.0][0]
+    bias = np.array([0.3, -0.2, 0.15])
+    cfg = TrackerConfig(pos_sigma_m=0.7, pos_gm_sigma_m=1.5, f_sigma_mps2=0.05)
+    _, _, trk = _track(
+        path, turn.t0_s - 30.0, turn.t1_s + 60.0, "dynamic", cfg=cfg, f_bias=bias, gm_m=1.5
+    )
+    np.testing.assert_allclose(trk.kf.x[9:12, 0], bias, atol=0.1)
+    # exact attitude and IMU: z2's noise falls to its floor (0.05 m/s² and 0.5 deg: 0.095)
+    assert np.all(np.sqrt(trk.acc_var_mps2) < 0.2)
+    nis = trk.nis_position / (trk.positions - 1)
+    assert 2.0 < nis < 4.0, nis
+    assert 1.5 < float(np.mean(trk.nees)) < 5.0, float(np.mean(trk.nees))
+    # noisy IMU samples (1 m/s² per axis): the estimated noise rises to them (a little below:
+    # what the manoeuvre model's excess predicted variance leaves) and z2's NIS stays ~3
+    rng = np.random.default_rng(5)
+    noisy = Tracker("dynamic", cfg)
+    st = path.evaluate(np.arange(turn.t0_s - 30.0, turn.t1_s + 30.0, 0.5))
+    g = gravity_down_mps2(path.frame, st.pos_ned_m)
+    for i, t in enumerate(st.t_s):
+        noisy.position(float(t), st.pos_ned_m[i] - STATION + rng.normal(0.0, 0.7, 3))
+        f_b = st.f_b_mps2[i] + rng.normal(0.0, 1.0, 3)
+        noisy.acceleration(float(t), acceleration_ned(st.mat_nb[i], f_b, g[i]), st.mat_nb[i])
+    assert np.all((np.sqrt(noisy.acc_var_mps2) > 0.4) & (np.sqrt(noisy.acc_var_mps2) < 1.5))
+    assert 2.0 < noisy.nis_acceleration / noisy.accelerations < 4.5
 
 
 def test_prediction_through_a_telemetry_loss_grows_its_uncertainty(turn_path):

@@ -5,7 +5,9 @@ service's own ``--gcs`` link). It draws :class:`~companion.console.model.Console
 twice a second: link health (STALE after 3 s of silence), navigation mode and
 accuracy, integrity against the approach categories' alert limits, outage timer,
 heading correction, the alert history, plots of the last minutes and the track,
-and with ``--station`` the tracking channel's azimuth, elevation and range.
+and with ``--station`` the tracking channel's azimuth, elevation and range
+(with ``--tracker-out`` its prediction sent on to an antenna tracker, 10 times a
+second: :mod:`companion.console.antenna`).
 
 Keys: ``c`` / ``r`` / ``u`` confirm, refuse, undo the heading correction
 (COMMAND_LONG MAV_CMD_USER_1 to component 191; its COMMAND_ACK is shown),
@@ -29,12 +31,14 @@ from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Input, Static
 from textual_plotext import PlotextPlot
 
+from companion.console.antenna import AntennaFeed
 from companion.console.model import ConsoleModel, NavMode, boot_text
 from companion.console.send import Sender
 from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, UdpLink, open_link
 
 REFRESH_S = 0.5
+ANTENNA_PERIOD_S = 0.1
 EARTH_RADIUS_M = 6_371_000.0
 """For the track plot's metres (a picture, not navigation)."""
 PARAM_QUIET_S = 0.5
@@ -183,12 +187,17 @@ class ConsoleApp(App[int]):
         url: str,
         model: ConsoleModel | None = None,
         clock: Callable[[], float] = time.time,
+        tracker_out: str | None = None,
     ) -> None:
         super().__init__()
         self.url = url
         self.clock = clock
         self.model = model or ConsoleModel()
         self.link: Link | None = None
+        self.tracker_out = tracker_out
+        self.antenna_link: Link | None = None
+        self.antenna: AntennaFeed | None = None
+        self.antenna_status = ""
         self.sender = Sender()
         self.parser = FrameParser()
         self.status = "no command sent yet"
@@ -226,12 +235,37 @@ class ConsoleApp(App[int]):
             self.status = f"cannot open {self.url}: {exc}"
         else:
             self.run_worker(self._receive(), exclusive=True, group="rx")
+        if self.tracker_out is not None and self.model.station is not None:
+            try:
+                self.antenna_link = await open_link(self.tracker_out)
+            except LinkError as exc:
+                self.antenna_status = f"antenna: cannot open {self.tracker_out}: {exc}"
+            else:
+                self.antenna = AntennaFeed(self.model.station)
+                self.set_interval(ANTENNA_PERIOD_S, self._feed_antenna)
         self.refresh_panels()
         self.set_interval(REFRESH_S, self.refresh_panels)
 
     async def on_unmount(self) -> None:
         if self.link is not None:
             await self.link.close()
+        if self.antenna_link is not None:
+            await self.antenna_link.close()
+
+    async def _feed_antenna(self) -> None:
+        """The prediction to the antenna tracker's link (GLOBAL_POSITION_INT)."""
+        if self.antenna is None or self.antenna_link is None:
+            return
+        m = self.model
+        now = self.clock()
+        frames = self.antenna.frames(now, m.track_estimate(now), m.aircraft_system, m.aircraft_type)
+        try:
+            for frame in frames:
+                await self.antenna_link.send(frame)
+        except LinkError as exc:
+            self.antenna_status = f"antenna: {exc}"
+            return
+        self.antenna_status = f"antenna: {self.antenna.sent} positions → {self.tracker_out}"
 
     async def _receive(self) -> None:
         assert self.link is not None
@@ -386,6 +420,8 @@ class ConsoleApp(App[int]):
             t.append(f"± {trk['pointing_sigma_deg']:.2f}° · {trk['range_sigma_m']:.1f} m (1σ)")
             if trk["predicted_s"] > 2.0:
                 t.append(f"\npredicted {trk['predicted_s']:.0f} s", style="bold yellow")
+        if self.antenna_status:
+            t.append(f"\n{self.antenna_status}", style="dim")
         self.query_one("#track", Panel).update(t)
 
         t = Text()

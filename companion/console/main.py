@@ -68,12 +68,16 @@ def run_console(
     station: str | None = None,
     web_port: int | None = None,
     web_url: str | None = None,
+    tracker_out: str | None = None,
 ) -> int:
     """``companion console``; returns the exit status."""
     try:
         frame = None if station is None else parse_station(station)
     except ValueError as exc:
         print(f"companion console: {exc}", file=sys.stderr)
+        return 1
+    if tracker_out is not None and frame is None:
+        print("companion console: --tracker-out needs --station", file=sys.stderr)
         return 1
     model = ConsoleModel(station=frame)
     if once or as_json:
@@ -96,13 +100,15 @@ def run_console(
         )
         return 1
     if web_port is not None:
-        return _serve(url, station, web_port, web_url)
-    app = ConsoleApp(url, model)
+        return _serve(url, station, web_port, web_url, tracker_out)
+    app = ConsoleApp(url, model, tracker_out=tracker_out)
     app.run()
     return 0
 
 
-def _serve(url: str, station: str | None, port: int, public_url: str | None) -> int:
+def _serve(
+    url: str, station: str | None, port: int, public_url: str | None, tracker_out: str | None
+) -> int:
     """The same app in a browser: textual-serve runs ``companion console`` per session.
 
     ``public_url`` is the address the browser reaches this machine by (the page opens
@@ -119,6 +125,8 @@ def _serve(url: str, station: str | None, port: int, public_url: str | None) -> 
     cmd = [sys.executable, "-m", "companion", "console", "--master", url]
     if station is not None:
         cmd += ["--station", station]
+    if tracker_out is not None:
+        cmd += ["--tracker-out", tracker_out]
     Server(
         shlex.join(cmd),
         host="0.0.0.0",

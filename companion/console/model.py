@@ -161,6 +161,10 @@ class ConsoleModel:
     t_boot_rx_s: float | None = None
     _attitude: tuple[float, float, float, float] | None = None
     tracker: Any = None
+    aircraft_system: int | None = None
+    """System id of the autopilot heard (component 1): the aircraft an antenna follows."""
+    aircraft_type: int | None = None
+    """Its HEARTBEAT's MAV_TYPE."""
 
     def __post_init__(self) -> None:
         if self.station is not None and self.tracker is None:
@@ -177,6 +181,7 @@ class ConsoleModel:
             return True
         if comp == AUTOPILOT_COMPONENT and msg.get_type() != "BAD_DATA":
             self.last_autopilot_rx_s = t_rx_s
+            self.aircraft_system = msg.get_srcSystem()
             self._take_autopilot(msg, t_rx_s)
         return False
 
@@ -233,7 +238,9 @@ class ConsoleModel:
 
     def _take_autopilot(self, msg: Any, t_rx_s: float) -> None:
         kind = msg.get_type()
-        if kind == "ATTITUDE":
+        if kind == "HEARTBEAT":
+            self.aircraft_type = int(msg.type)
+        elif kind == "ATTITUDE":
             t = msg.time_boot_ms / 1000.0
             self._attitude = (t, float(msg.roll), float(msg.pitch), float(msg.yaw))
         elif kind in ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3"):
@@ -259,7 +266,11 @@ class ConsoleModel:
             return
         t = self._track_time(t_s)
         if t is not None:
-            self.tracker.position(t, self.station.lla_to_ned(lat_rad, lon_rad, alt_m))
+            # the published 1σ accuracies are the position's noise, when they are known
+            sigma = None
+            if self.h_acc_m is not None and self.v_acc_m is not None:
+                sigma = np.array([self.h_acc_m, self.h_acc_m, self.v_acc_m])
+            self.tracker.position(t, self.station.lla_to_ned(lat_rad, lon_rad, alt_m), sigma)
 
     def _track_dynamics(self, t_s: float, f_b_mps2: np.ndarray) -> None:
         from companion.nav.tracking import acceleration_ned
@@ -275,8 +286,8 @@ class ConsoleModel:
         g = earth.gravity_mps2(math.radians(self.lat_deg), self.alt_msl_m)
         # the aircraft's NED and the station's differ by the Earth's curvature between
         # them: well under a degree within tracking range, neglected here
-        acc = acceleration_ned(euler_to_mat_nb(roll, pitch, yaw), f_b_mps2, g)
-        self.tracker.acceleration(t, acc)
+        mat_nb = euler_to_mat_nb(roll, pitch, yaw)
+        self.tracker.acceleration(t, acceleration_ned(mat_nb, f_b_mps2, g), mat_nb)
 
     # ----------------------------------------------------------------- output
     def boot_time(self, now_s: float) -> float | None:

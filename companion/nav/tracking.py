@@ -1,32 +1,37 @@
 """Tracking the aircraft from a ground station: azimuth, elevation, range and their rates.
 
 The θ-θ channel of "Tracking with the aircraft's kinematic and dynamic parameters":
-each channel (azimuth β, elevation ε, range D) is a constant-acceleration filter
-whose acceleration changes by white noise, updated with two observations (the
-paper's z1, z2):
+a constant-acceleration filter whose acceleration changes by white noise, updated
+with two observations (the paper's z1, z2):
 
-    z1(k) = θ(k) + v1(k)        the channel's value from the reported position
-    z2(k) = θ̈(k) + v2(k)        its second derivative from the aircraft's own
-                                attitude and specific force (load factors)
+    z1(k) = r(k) + v1(k)                  the reported position
+    z2(k) = a(k) + C_nb b + v2(k)         the aircraft's acceleration from its own
+                                          attitude and specific force, a = C_nb f_b + g
 
-z2 is the aircraft's acceleration ``a_ned = C_nb f_b + g_ned`` taken into the
-station's spherical coordinates with the exact kinematics of ``atan2`` and the
-norm (:func:`spherical_rates`), the position and velocity terms from the
-filter's own state. The acceleration observation keeps the track through a
-manoeuvre (the state's acceleration is measured, not guessed) and carries the
-prediction through a loss of the positions.
+The paper writes both per angle channel (θ and θ̈). Here the state is the
+station-relative position, velocity and acceleration in the station's NED frame,
+where both observations are linear; the angles, their rates and their
+accelerations are exact functions of (r, v, a) (:func:`spherical_rates`), so the
+angular-acceleration observation carries the same information without the
+linearisation of its velocity terms (2 β̇ ρ̇/ρ and the like) about the filter's
+own rates. Two additions the real telemetry needs:
 
-Baselines, per channel as the paper compares them: Singer's manoeuvring-target
-model (Singer 1970; acceleration a first-order Markov process of time constant
-τ and variance σ_m²) and a constant-velocity filter (white acceleration). The
-standard machinery is filterpy's :class:`~filterpy.kalman.KalmanFilter`; the
-Singer process noise is van Loan's discretisation (filterpy.common).
+* ``b``: a body-frame bias of the acceleration observation (a tilt offset between
+  ATTITUDE and the accelerometer, an accelerometer bias), a slow random walk;
+  real autopilot logs show 0.2–0.9 m/s² of it, which would otherwise be taken
+  for a manoeuvre;
+* the observation noise of z2 is estimated from its own innovations (covariance
+  matching, Mohamed and Schwarz 1999), floored at the sensor model: one IMU sample taken down a
+  telemetry link carries vibration that depends on the airframe.
 
-Angular process and observation noises are the linear ones divided by the
-range estimate. Pure: no I/O, no clock (times are the samples' ``t_s``).
-The frame is the station's local NED (:class:`companion.nav.frames.LocalFrame`);
-elevation near ±90° (overhead) is a singularity of the angles, as for any
-az/el mount.
+Baselines, in the same frame and machinery (filterpy's
+:class:`~filterpy.kalman.KalmanFilter`), positions only: Singer's
+manoeuvring-target model (Singer 1970: the acceleration a first-order Markov
+process of time constant τ and variance σ_m², van Loan's discretisation) and a
+constant-velocity filter (white acceleration).
+
+Pure: no I/O, no clock (times are the samples' ``t_s``). Elevation near ±90°
+(overhead) is a singularity of the angles, as for any az/el mount.
 """
 
 from __future__ import annotations
@@ -41,32 +46,58 @@ from filterpy.common import Q_continuous_white_noise, van_loan_discretization
 from filterpy.kalman import KalmanFilter
 from filterpy.kalman import predict as kf_predict
 
-from companion.nav.rotations import wrap_pi
 from companion.types import FloatArray
 
 Model = Literal["dynamic", "singer", "cv"]
 MODELS: tuple[Model, ...] = ("dynamic", "singer", "cv")
-CHANNELS = ("az", "el", "range")
 MIN_RANGE_M = 10.0
-"""Below this the angles are meaningless; the angular noises are scaled with it as a floor."""
+"""Below this the angles are meaningless: positions this close to the station are refused."""
+GRAVITY_MPS2 = 9.80665
+_I3 = np.eye(3)
 
 
 @dataclass(frozen=True, slots=True)
 class TrackerConfig:
-    """Noise model of the tracking channels (SI units, 1σ)."""
+    """Noise model of the tracking filters (SI units, 1σ).
 
-    pos_sigma_m: float = 2.0
-    """Reported position's error across and along the line of sight, m."""
-    dyn_jerk_psd: float = 1.0
-    """Dynamic channel: power spectral density of the acceleration's change, m²/s⁵."""
-    dyn_acc_sigma_mps2: float = 0.3
-    """Dynamic channel: error of the acceleration from attitude and specific force, m/s²."""
+    The motion model is the same for the dynamic channel and Singer's (σ_m, τ:
+    Singer's values for an evasive manoeuvre, not fitted): they differ only by
+    the second observation. The measurement noises are the telemetry's
+    (defaults: an autopilot's estimate over a radio link, see
+    ``bench/tracking.py``'s realistic profile), the same for every model.
+    """
+
+    pos_sigma_m: float = 0.7
+    """White error of a reported position per axis, m (unless the report carries one)."""
+    pos_gm_sigma_m: float = 1.5
+    """Slowly wandering error of the reported positions per axis (first-order Markov), m."""
+    pos_gm_tau_s: float = 30.0
+    """Its correlation time, s."""
     singer_tau_s: float = 10.0
-    """Singer: manoeuvre time constant 1/α, s."""
+    """Singer and dynamic: manoeuvre time constant 1/α, s."""
     singer_sigma_mps2: float = 3.0
-    """Singer: standard deviation of the manoeuvre acceleration σ_m, m/s²."""
-    cv_acc_psd: float = 4.0
+    """Singer and dynamic: standard deviation of the manoeuvre acceleration σ_m, m/s²."""
+    cv_acc_psd: float = 3.0
     """Constant velocity: power spectral density of the white acceleration, m²/s³."""
+    f_sigma_mps2: float = 0.5
+    """Dynamic: noise of one accelerometer sample down the link (vibration), m/s²."""
+    att_sigma_rad: float = math.radians(0.5)
+    """Dynamic: noise of one ATTITUDE message, rad (with f: the floor of z2's noise)."""
+    acc_sigma_start_mps2: float = 1.0
+    """Dynamic: z2's noise assumed before its innovations tell, m/s²."""
+    acc_sigma_max_mps2: float = 5.0
+    """Dynamic: the estimated z2 noise is kept below this, m/s²."""
+    acc_noise_memory: int = 50
+    """Dynamic: samples over which the z2 noise is estimated (forgetting factor 1/N)."""
+    bias_sigma_mps2: float = 0.5
+    """Dynamic: prior 1σ of the body-frame bias of z2 per axis, m/s²."""
+    bias_walk_psd: float = 1e-4
+    """Dynamic: random walk of that bias, m²/s⁵."""
+
+    @property
+    def acc_sigma_floor_mps2(self) -> float:
+        """z2's noise from the sensor model alone: √(σ_f² + (g σ_att)²)."""
+        return math.hypot(self.f_sigma_mps2, GRAVITY_MPS2 * self.att_sigma_rad)
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,15 +116,16 @@ class TrackEstimate:
     range_sigma_m: float
     since_position_s: float
     """Time since the last reported position, s (the prediction's length)."""
+    pos_ned_m: FloatArray
+    """The estimated position in the station's NED frame, m."""
+    vel_ned_mps: FloatArray
+    pos_cov_m2: FloatArray
+    """Covariance of ``pos_ned_m``, m² (3×3)."""
 
     @property
     def pointing_sigma_rad(self) -> float:
         """1σ of the pointing error (the angle between estimated and true line of sight)."""
         return math.hypot(self.az_sigma_rad * math.cos(self.el_rad), self.el_sigma_rad)
-
-    def pos_ned_m(self) -> FloatArray:
-        """The estimated position in the station's NED frame, m."""
-        return los_to_ned(self.az_rad, self.el_rad, self.range_m)
 
 
 def ned_to_spherical(pos_ned_m: FloatArray) -> tuple[float, float, float]:
@@ -107,6 +139,22 @@ def los_to_ned(az_rad: float, el_rad: float, range_m: float) -> FloatArray:
     """(azimuth, elevation, range) to a station-relative NED position, m."""
     ce = math.cos(el_rad)
     return range_m * np.array([ce * math.cos(az_rad), ce * math.sin(az_rad), -math.sin(el_rad)])
+
+
+def spherical_jacobian(pos_ned_m: FloatArray) -> FloatArray:
+    """∂(β, ε, D)/∂(N, E, D) at a station-relative position (rows: az, el, range)."""
+    n, e, d = (float(x) for x in pos_ned_m)
+    rho2 = max(n * n + e * e, 1e-9)
+    rho = math.sqrt(rho2)
+    dist2 = rho2 + d * d
+    dist = math.sqrt(dist2)
+    return np.array(
+        [
+            [-e / rho2, n / rho2, 0.0],
+            [n * d / (rho * dist2), e * d / (rho * dist2), -rho / dist2],
+            [n / dist, e / dist, d / dist],
+        ]
+    )
 
 
 def spherical_rates(
@@ -170,66 +218,35 @@ def _singer_unit(dt: float, tau_s: float) -> tuple[FloatArray, FloatArray]:
     return f, q
 
 
-class _Channel:
-    """One channel (β, ε or D): a filterpy KalmanFilter with this model's F and Q."""
+@functools.lru_cache(maxsize=1024)
+def _transition(model: Model, dt: float, cfg: TrackerConfig) -> tuple[FloatArray, FloatArray]:
+    """(F, Q) over ``dt`` for the state [r, v, (a), (b), e], 3 axes each (cached)."""
+    if model == "cv":
+        f1 = np.array([[1.0, dt], [0.0, 1.0]])
+        q1 = Q_continuous_white_noise(2, dt, cfg.cv_acc_psd)
+    else:
+        f1, q1 = _singer_unit(dt, cfg.singer_tau_s)
+        q1 = q1 * cfg.singer_sigma_mps2**2
+    n = 3 * f1.shape[0]
+    dim = _dim(model)
+    f = np.eye(dim)
+    f[:n, :n] = np.kron(f1, _I3)
+    q = np.zeros((dim, dim))
+    q[:n, :n] = np.kron(q1, _I3)
+    if model == "dynamic":
+        q[9:12, 9:12] = cfg.bias_walk_psd * dt * _I3
+    # the reported positions' wandering error: e' = -e/τ + w
+    phi = math.exp(-dt / cfg.pos_gm_tau_s)
+    f[dim - 3 :, dim - 3 :] = phi * _I3
+    q[dim - 3 :, dim - 3 :] = cfg.pos_gm_sigma_m**2 * (1.0 - phi * phi) * _I3
+    for m in (f, q):
+        m.setflags(write=False)
+    return f, q
 
-    def __init__(self, model: Model, cfg: TrackerConfig, angular: bool, wraps: bool) -> None:
-        self.model = model
-        self.cfg = cfg
-        self.angular = angular
-        self.wraps = wraps
-        dim = 2 if model == "cv" else 3
-        self.kf = KalmanFilter(dim_x=dim, dim_z=1)
-        self.t_s: float | None = None
 
-    def start(self, t_s: float, value: float, sigma: float, scale: float) -> None:
-        dim = self.kf.dim_x
-        self.kf.x = np.zeros((dim, 1))
-        self.kf.x[0, 0] = value
-        # rates unknown at the first fix: ~100 m/s and ~10 m/s² across the line of sight
-        p = [sigma**2, (100.0 / scale) ** 2, (10.0 / scale) ** 2][:dim]
-        self.kf.P = np.diag(p)
-        self.t_s = t_s
-
-    def _fq(self, dt: float, scale: float) -> tuple[FloatArray, FloatArray]:
-        """Transition and process noise over ``dt`` (angular channels: linear / range)."""
-        s2 = 1.0 / (scale * scale)
-        cfg = self.cfg
-        if self.model == "cv":
-            f = np.array([[1.0, dt], [0.0, 1.0]])
-            return f, Q_continuous_white_noise(2, dt, cfg.cv_acc_psd * s2)
-        if self.model == "dynamic":
-            f = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-            return f, Q_continuous_white_noise(3, dt, cfg.dyn_jerk_psd * s2)
-        f, q = _singer_unit(round(dt, 6), cfg.singer_tau_s)
-        return f, q * (cfg.singer_sigma_mps2**2 * s2)
-
-    def predicted(self, t_s: float, scale: float) -> tuple[FloatArray, FloatArray]:
-        """(x, P) predicted to ``t_s`` without changing the filter."""
-        assert self.t_s is not None
-        dt = t_s - self.t_s
-        if dt <= 0.0:
-            return self.kf.x.copy(), self.kf.P.copy()
-        f, q = self._fq(dt, scale)
-        x, p = kf_predict(self.kf.x, self.kf.P, f, q)
-        return x, p
-
-    def advance(self, t_s: float, scale: float) -> None:
-        assert self.t_s is not None
-        dt = t_s - self.t_s
-        if dt > 0.0:
-            f, q = self._fq(dt, scale)
-            self.kf.predict(F=f, Q=q)
-            self.t_s = t_s
-
-    def update(self, z: float, sigma: float, derivative: int) -> None:
-        h = np.zeros((1, self.kf.dim_x))
-        h[0, derivative] = 1.0
-        if self.wraps and derivative == 0:
-            z = float(self.kf.x[0, 0]) + wrap_pi(z - float(self.kf.x[0, 0]))
-        self.kf.update(np.array([[z]]), R=np.array([[sigma * sigma]]), H=h)
-        if self.wraps:
-            self.kf.x[0, 0] = wrap_pi(float(self.kf.x[0, 0]))
+def _dim(model: Model) -> int:
+    """State size: r, v (cv); r, v, a (singer); r, v, a, b (dynamic); then e."""
+    return {"cv": 6, "singer": 9, "dynamic": 12}[model] + 3
 
 
 class Tracker:
@@ -237,9 +254,15 @@ class Tracker:
 
     Feed :meth:`position` with each reported position (station NED, m) and, for
     the ``dynamic`` model, :meth:`acceleration` with each acceleration from the
-    aircraft's attitude and specific force (:func:`acceleration_ned`); the
+    aircraft's attitude and specific force (:func:`acceleration_ned`, and the
+    attitude itself so that the bias is estimated in the body frame); the
     baselines ignore the latter. :meth:`estimate` predicts to any time.
-    Samples older than the filter's time are counted in ``rejected`` and dropped.
+    Samples older than the filter's time, non-finite or on the station are
+    counted in ``rejected`` and dropped.
+
+    ``nis_position`` / ``nis_acceleration``: sums of the normalised innovation
+    squares (3 degrees of freedom each) over ``positions`` / ``accelerations``
+    updates, the filter's own consistency check.
     """
 
     def __init__(self, model: Model = "dynamic", config: TrackerConfig | None = None) -> None:
@@ -247,73 +270,115 @@ class Tracker:
             raise ValueError(f"unknown tracking model {model!r} (known: {', '.join(MODELS)})")
         self.model: Model = model
         self.cfg = config or TrackerConfig()
-        self._ch = (
-            _Channel(model, self.cfg, angular=True, wraps=True),
-            _Channel(model, self.cfg, angular=True, wraps=False),
-            _Channel(model, self.cfg, angular=False, wraps=False),
-        )
+        self._order = 2 if model == "cv" else 3
+        self._dim = _dim(model)
+        self.kf = KalmanFilter(dim_x=self._dim, dim_z=3)
         self.t_s: float | None = None
         self.t_position_s: float | None = None
         self.positions = 0
         self.accelerations = 0
         self.rejected = 0
+        self.nis_position = 0.0
+        self.nis_acceleration = 0.0
+        self.acc_var_mps2 = np.full(
+            3, max(self.cfg.acc_sigma_start_mps2, self.cfg.acc_sigma_floor_mps2) ** 2
+        )
+        """The estimated variance of z2 per NED axis, m²/s⁴."""
 
     @property
     def started(self) -> bool:
         return self.t_s is not None
 
-    def _range_scale(self) -> float:
-        return max(float(self._ch[2].kf.x[0, 0]), MIN_RANGE_M)
+    def _fq(self, dt: float) -> tuple[FloatArray, FloatArray]:
+        return _transition(self.model, round(dt, 6), self.cfg)
 
     def _advance(self, t_s: float) -> bool:
         if self.t_s is None or t_s < self.t_s:
             self.rejected += self.t_s is not None
             return False
-        scale = self._range_scale()
-        for ch in self._ch:
-            ch.advance(t_s, 1.0 if not ch.angular else scale)
-        self.t_s = t_s
+        dt = t_s - self.t_s
+        if dt > 0.0:
+            f, q = self._fq(dt)
+            self.kf.predict(F=f, Q=q)
+            self.t_s = t_s
         return True
 
-    def position(self, t_s: float, pos_ned_m: FloatArray) -> bool:
-        """Update with a reported position (station-relative NED, m); False if rejected."""
-        if not np.all(np.isfinite(pos_ned_m)):
+    def _start(self, t_s: float, pos_ned_m: FloatArray, r: FloatArray) -> None:
+        x = np.zeros((self._dim, 1))
+        x[0:3, 0] = pos_ned_m
+        # rates unknown at the first fix: ~100 m/s and ~10 m/s²
+        p = [np.diag(r), 100.0**2 * _I3, 10.0**2 * _I3][: self._order]
+        if self.model == "dynamic":
+            p.append(self.cfg.bias_sigma_mps2**2 * _I3)
+        p.append(self.cfg.pos_gm_sigma_m**2 * _I3)
+        self.kf.x = x
+        self.kf.P = np.zeros((self._dim, self._dim))
+        for i, blk in enumerate(p):
+            self.kf.P[3 * i : 3 * i + 3, 3 * i : 3 * i + 3] = blk
+        # r = z1 - e: the first position carries the wandering error too
+        gm2 = self.cfg.pos_gm_sigma_m**2 * _I3
+        self.kf.P[0:3, 0:3] += gm2
+        self.kf.P[0:3, self._dim - 3 :] = -gm2
+        self.kf.P[self._dim - 3 :, 0:3] = -gm2
+        self.t_s = t_s
+
+    def position(
+        self, t_s: float, pos_ned_m: FloatArray, sigma_ned_m: FloatArray | None = None
+    ) -> bool:
+        """Update with a reported position (station-relative NED, m; optionally its 1σ per
+        axis, m); False if rejected."""
+        pos = np.asarray(pos_ned_m, dtype=float)
+        if not np.all(np.isfinite(pos)) or float(np.linalg.norm(pos)) < MIN_RANGE_M:
             self.rejected += 1
             return False
-        az, el, dist = ned_to_spherical(pos_ned_m)
-        if dist < MIN_RANGE_M:
-            self.rejected += 1
-            return False
-        sig = self.cfg.pos_sigma_m
+        sig = np.full(3, self.cfg.pos_sigma_m)
+        if sigma_ned_m is not None and np.all(np.isfinite(sigma_ned_m)):
+            sig = np.maximum(np.asarray(sigma_ned_m, dtype=float), 0.1)
+        r = np.diag(sig * sig)
         if self.t_s is None:
-            for ch, v in zip(self._ch, (az, el, dist), strict=True):
-                ch.start(t_s, v, sig / dist if ch.angular else sig, dist if ch.angular else 1.0)
-            self.t_s = t_s
+            self._start(t_s, pos, np.diag(r))
         elif not self._advance(t_s):
             return False
         else:
-            for ch, v in zip(self._ch, (az, el, dist), strict=True):
-                ch.update(v, sig / dist if ch.angular else sig, 0)
+            h = np.zeros((3, self._dim))
+            h[:, 0:3] = _I3
+            h[:, self._dim - 3 :] = _I3  # z1 = r + e + v1
+            self.kf.update(pos.reshape(3, 1), R=r, H=h)
+            self.nis_position += (self.kf.y.T @ self.kf.SI @ self.kf.y).item()
         self.t_position_s = t_s
         self.positions += 1
         return True
 
-    def acceleration(self, t_s: float, acc_ned_mps2: FloatArray) -> bool:
-        """Second observation: the aircraft's acceleration (station NED, m/s²)."""
-        if self.model != "dynamic":
+    def acceleration(
+        self, t_s: float, acc_ned_mps2: FloatArray, mat_nb: FloatArray | None = None
+    ) -> bool:
+        """Second observation: the aircraft's acceleration (station NED, m/s²), from the
+        attitude ``mat_nb`` (body to NED) and the specific force (dynamic model only)."""
+        if self.model != "dynamic" or self.t_s is None:
             return False
-        if not np.all(np.isfinite(acc_ned_mps2)) or not self._advance(t_s):
-            if self.t_s is not None and not np.all(np.isfinite(acc_ned_mps2)):
-                self.rejected += 1
+        acc = np.asarray(acc_ned_mps2, dtype=float)
+        if not np.all(np.isfinite(acc)) or (mat_nb is not None and not np.all(np.isfinite(mat_nb))):
+            self.rejected += 1
             return False
-        az, el, dist = (float(ch.kf.x[0, 0]) for ch in self._ch)
-        dist = max(dist, MIN_RANGE_M)
-        rates = np.array([float(ch.kf.x[1, 0]) for ch in self._ch])
-        vel = los_velocity_ned(az, el, dist, rates)
-        _, second = spherical_rates(los_to_ned(az, el, dist), vel, np.asarray(acc_ned_mps2))
-        sig = self.cfg.dyn_acc_sigma_mps2
-        for ch, v in zip(self._ch, second, strict=True):
-            ch.update(float(v), sig / dist if ch.angular else sig, 2)
+        if not self._advance(t_s):
+            return False
+        h = np.zeros((3, self._dim))
+        h[:, 6:9] = _I3
+        if mat_nb is not None:
+            h[:, 9:12] = np.asarray(mat_nb, dtype=float)
+        # z2's noise by covariance matching of the innovations (Mohamed and Schwarz
+        # 1999, eq. 20-28):
+        # E[ν νᵀ] = H P⁻ Hᵀ + R; the plain mean of the first N samples, then a fading
+        # memory of N; from a cautious start, between the sensor model's floor and a cap
+        nu = acc - (h @ self.kf.x)[:, 0]
+        hph = np.diag(h @ self.kf.P @ h.T)
+        lam = 1.0 / min(self.accelerations + 1, max(self.cfg.acc_noise_memory, 1))
+        est = (1.0 - lam) * self.acc_var_mps2 + lam * (nu * nu - hph)
+        self.acc_var_mps2 = np.clip(
+            est, self.cfg.acc_sigma_floor_mps2**2, self.cfg.acc_sigma_max_mps2**2
+        )
+        self.kf.update(acc.reshape(3, 1), R=np.diag(self.acc_var_mps2), H=h)
+        self.nis_acceleration += (self.kf.y.T @ self.kf.SI @ self.kf.y).item()
         self.accelerations += 1
         return True
 
@@ -322,24 +387,33 @@ class Tracker:
         if self.t_s is None or self.t_position_s is None:
             return None
         t = max(t_s, self.t_s)
-        scale = self._range_scale()
-        xs, ps = [], []
-        for ch in self._ch:
-            x, p = ch.predicted(t, scale if ch.angular else 1.0)
-            xs.append(x)
-            ps.append(p)
+        x, p = self.kf.x, self.kf.P
+        if t > self.t_s:
+            f, q = self._fq(t - self.t_s)
+            x, p = kf_predict(x, p, f, q)
+        r = x[0:3, 0]
+        v = x[3:6, 0]
+        a = x[6:9, 0] if self._order == 3 else np.zeros(3)
+        az, el, dist = ned_to_spherical(r)
+        first, _ = spherical_rates(r, v, a)
+        pr = p[0:3, 0:3]
+        jac = spherical_jacobian(r)
+        var = np.maximum(np.diag(jac @ pr @ jac.T), 0.0)
         return TrackEstimate(
             t_s=t,
-            az_rad=wrap_pi(float(xs[0][0, 0])),
-            el_rad=float(xs[1][0, 0]),
-            range_m=float(xs[2][0, 0]),
-            az_rate_radps=float(xs[0][1, 0]),
-            el_rate_radps=float(xs[1][1, 0]),
-            range_rate_mps=float(xs[2][1, 0]),
-            az_sigma_rad=math.sqrt(max(float(ps[0][0, 0]), 0.0)),
-            el_sigma_rad=math.sqrt(max(float(ps[1][0, 0]), 0.0)),
-            range_sigma_m=math.sqrt(max(float(ps[2][0, 0]), 0.0)),
+            az_rad=az,
+            el_rad=el,
+            range_m=dist,
+            az_rate_radps=float(first[0]),
+            el_rate_radps=float(first[1]),
+            range_rate_mps=float(first[2]),
+            az_sigma_rad=math.sqrt(var[0]),
+            el_sigma_rad=math.sqrt(var[1]),
+            range_sigma_m=math.sqrt(var[2]),
             since_position_s=t - self.t_position_s,
+            pos_ned_m=r.copy(),
+            vel_ned_mps=v.copy(),
+            pos_cov_m2=pr.copy(),
         )
 
 
@@ -347,5 +421,5 @@ def pointing_error_rad(est: TrackEstimate, true_pos_ned_m: FloatArray) -> float:
     """Angle between the estimated and the true line of sight, rad."""
     u = los_to_ned(est.az_rad, est.el_rad, 1.0)
     v = np.asarray(true_pos_ned_m, dtype=float)
-    v = v / np.linalg.norm(v)
-    return float(math.atan2(np.linalg.norm(np.cross(u, v)), float(np.dot(u, v))))
+    c = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+    return float(math.atan2(math.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2), float(u @ v)))
