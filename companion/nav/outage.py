@@ -78,7 +78,7 @@ class OutageConfig:
     """Thresholds of the outage logic (all times on the autopilot clock)."""
 
     gnss_timeout_s: float = ranged(1.0, gt=0.0, finite=False)
-    """No usable fix for this long -> GNSS_LOST and BRIDGING. Five missed epochs at 5 Hz."""
+    """No usable fix for this long -> GNSS_LOST (mode BRIDGING). Five missed epochs at 5 Hz."""
     timeout_fix_intervals: float = ranged(1.5, ge=1.0)
     """A receiver slower than ``gnss_timeout_s`` allows (a telemetry link's 1 Hz) is late
     only after this many of its own fix intervals (the median of the last
@@ -263,7 +263,12 @@ class OutageMonitor:
             reinit = bool(why)
         if not reinit and not alerts:
             return _USABLE  # the common verdict, shared (it is immutable)
-        if reinit:
+        if reinit and self.mode in OUTAGE_MODES and self.outage_start_t_s is not None:
+            # the reset ends an outage: its GNSS_BACK says "re-initialised" (one alert for
+            # one change, not a FAULT and a GNSS_BACK at the same instant)
+            self.resets += 1
+            log.warning("t=%.2f s: %s (ends the outage)", t, why)
+        elif reinit:
             alerts += self._reset_alert(t, why)
         return FixAssessment(True, "ok", not reinit, reinit, tuple(alerts))
 
@@ -397,10 +402,10 @@ class OutageMonitor:
             stale = any(r.stale for r in self._receivers.values())
             reason = "stale fixes" if stale else self._silence_reason(t_s)
             self.outage_start_t_s = self.last_fused_t_s
-            alerts.append(
-                Alert(t_s, AlertCode.GNSS_LOST, Severity.WARNING, f"{reason} {silent_s:.1f} s")
-            )
-            alerts.append(Alert(t_s, AlertCode.BRIDGING, Severity.WARNING, "position carried"))
+            # one alert per gap: the loss says the position is carried (no separate
+            # BRIDGING text: a pilot hears one message per change)
+            text = f"{reason} {silent_s:.1f} s: bridging"
+            alerts.append(Alert(t_s, AlertCode.GNSS_LOST, Severity.WARNING, text))
             self._gated_rejects = 0
             self._set_mode(NavMode.BRIDGING)
         if silent_s > cfg.max_bridge_s and self.mode in (NavMode.BRIDGING, NavMode.REACQUIRING):

@@ -44,7 +44,7 @@ def test_timeout_reacquire_and_back_after_n_gated_fixes():
     start(mon)
     assert mon.tick(2.5) == []
     lost = mon.tick(2.95)
-    assert codes(lost) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    assert codes(lost) == [AlertCode.GNSS_LOST]
     assert mon.outage_s(5.0) == pytest.approx(5.0 - 1.9)
     for k, t in enumerate((6.0, 6.1, 6.2)):
         v = mon.assess(fix(t))
@@ -65,11 +65,11 @@ def test_a_slow_receiver_is_late_after_its_own_intervals_not_the_fixed_timeout()
         mon.gate_result(float(t), True)
     assert mon.timeout_s == pytest.approx(1.5)
     assert mon.tick(6.2) == []
-    assert codes(mon.tick(6.6)) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    assert codes(mon.tick(6.6)) == [AlertCode.GNSS_LOST]
     fast = OutageMonitor()
     start(fast)
     assert fast.timeout_s == pytest.approx(1.0)
-    assert codes(fast.tick(2.95)) == [AlertCode.GNSS_LOST, AlertCode.BRIDGING]
+    assert codes(fast.tick(2.95)) == [AlertCode.GNSS_LOST]
     fast.reset()
     assert fast.timeout_s == pytest.approx(1.0)
 
@@ -84,7 +84,10 @@ def test_rejected_fixes_while_reacquiring_lead_to_reinitialisation():
         mon.gate_result(6.1 + k / 10, False)
     verdict = mon.assess(fix(6.6))
     assert verdict.reinitialise and not verdict.gate
-    assert AlertCode.FAULT in codes(verdict.alerts)
+    # one alert for the change: the GNSS_BACK that ends the outage says re-initialised
+    assert AlertCode.FAULT not in codes(verdict.alerts) and mon.resets == 1
+    back = mon.reinitialised(6.6)
+    assert codes(back) == [AlertCode.GNSS_BACK] and "re-initialised" in back[0].text
 
 
 def test_downgrade_rtk_lost_once_and_degraded_mode():
