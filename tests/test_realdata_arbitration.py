@@ -21,15 +21,7 @@ FLIGHTS = Path(__file__).resolve().parent.parent.parent / "shared" / "realdata" 
 WITH_GNSS = [
     "real_copter_dronekit_log171",
     "real_copter_erle_gps_issues1",
-    pytest.param(
-        "real_copter_erle_loiter_rtl",
-        marks=pytest.mark.xfail(
-            strict=True,
-            reason="known failure: after the 7 s GNSS gap at 97 s the attitude-aided blend "
-            "has drifted 16 m, the returning receiver is gated for 2 s until its own chain "
-            "makes it self-consistent, and the output reaches 25.06 m before the reset",
-        ),
-    ),
+    "real_copter_erle_loiter_rtl",
     "real_gcs_copter_phoenix_mission1",
     "real_plane_erle_2014-12-04",
 ]
