@@ -412,7 +412,9 @@ class Engine:
         navs.select(self.now_s)
         rid = fix.receiver_id
         # another receiver's separation (or a reference) showed it wrong: no reset to it
-        verdict = self.outage.assess(fix, shown_wrong=self.integrity.fde.shown_wrong(rid))
+        verdict = self.outage.assess(
+            fix, shown_wrong=self.integrity.fde.shown_wrong(rid), now_s=self.now_s
+        )
         outputs += verdict.alerts
         if not verdict.usable:
             self.stats.gnss[verdict.reason] += 1
