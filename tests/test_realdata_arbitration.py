@@ -21,10 +21,6 @@ FLIGHTS = Path(__file__).resolve().parent.parent.parent / "shared" / "realdata" 
 WITH_GNSS = [
     "real_copter_dronekit_log171",
     "real_copter_erle_gps_issues1",
-    # after the 7 s GNSS gap at 97 s the attitude-aided blend has drifted 16 m and the
-    # returning receiver is gated for 2 s until its own chain makes it self-consistent:
-    # published on each fused fix, the output stays within 24.96 m of the receiver (25.06 m
-    # when it was published on the 10 Hz tick); a margin of centimetres, the cause stands
     "real_copter_erle_loiter_rtl",
     "real_gcs_copter_phoenix_mission1",
     "real_plane_erle_2014-12-04",

@@ -43,6 +43,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from companion.engine.bridge import PotentialBridge
+from companion.engine.bridge_choice import BridgeEvidence, inertial_accel_sigma_mps2
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
 from companion.engine.publish import Publisher, publication_time_s, tick
@@ -183,6 +184,8 @@ class Engine:
         """Everything of one autopilot boot, from scratch (at start and after a reboot)."""
         cfg = self.config
         self.integrity = IntegrityMonitor(self._integrity_config)
+        self.bridge_evidence = BridgeEvidence(inertial_accel_sigma_mps2(self._blend_config))
+        """Probes of the inertial bridge against constant velocity (:mod:`.bridge_choice`)."""
         self._restart_navigation()
         self.watch = StreamWatch(cfg.silence_timeout_s, cfg.no_gnss_alert_s, cfg.no_gnss_repeat_s)
         """Silence of the autopilot's data and no GNSS at all (:mod:`.silence`)."""
@@ -227,6 +230,10 @@ class Engine:
         self._next_outage_tick_s = -math.inf
         self._fix_fused = False
         """A fix was fused since the last publication (``publish_on_fix``)."""
+        self.bridge_evidence.reset()
+        self._bridge_cv = False
+        """This gap is carried by constant velocity (the evidence said the inertial bridge
+        is worse): the pass-through publishes until GNSS is back."""
 
     # ------------------------------------------------------------------ entry point
 
@@ -263,7 +270,7 @@ class Engine:
             # (publish.tick, inline)
             if now >= self._next_outage_tick_s:
                 self._next_outage_tick_s = now + OUTAGE_TICK_S
-                outputs += self.outage.tick(now)
+                outputs += self._gap_started(self.outage.tick(now))
             if self.config.publish_on_fix:
                 last_s = self._last_publish_s  # due times to within 1 us (0.1 is not binary)
                 if (
@@ -310,11 +317,34 @@ class Engine:
         the solution with, and after ``silence_timeout_s`` the navigation restarts."""
         outputs: list[Output] = []
         if self.outage.last_fused_t_s is not None:
-            outputs += self.outage.tick(t_s)
+            outputs += self._gap_started(self.outage.tick(t_s))
         outputs += self.watch.tick(t_s)
         if outputs:
             self._account(outputs)
         return outputs
+
+    def _gap_started(self, alerts: list[Alert]) -> list[Alert]:
+        """At a GNSS loss, choose the bridge's motion model on the evidence (inertial
+        prediction or constant velocity, :mod:`.bridge_choice`); the loss alert says which
+        when it is constant velocity."""
+        if not alerts:
+            return alerts
+        out: list[Alert] = []
+        for alert in alerts:
+            if alert.code is AlertCode.GNSS_LOST:
+                navs = self.navigators
+                carrying_blend = navs.primary is not None and navs.navigator is navs.primary
+                self._bridge_cv = carrying_blend and self.bridge_evidence.constant_velocity_better()
+                if self._bridge_cv:
+                    log.info(
+                        "t=%.2f s: gap bridged by constant velocity (%s)",
+                        alert.t_s,
+                        self.bridge_evidence.describe(),
+                    )
+                    self.stats.gnss["gap_bridged_cv"] += 1
+                    alert = dataclasses.replace(alert, text=alert.text + " on velocity")
+            out.append(alert)
+        return out
 
     def _after_silence(self, t_s: float, silence_s: float) -> list[Output]:
         """The first data sample after ``silence_s`` of none: the navigation restarts from
@@ -418,7 +448,9 @@ class Engine:
         navs.select(self.now_s)
         rid = fix.receiver_id
         # another receiver's separation (or a reference) showed it wrong: no reset to it
-        verdict = self.outage.assess(fix, shown_wrong=self.integrity.fde.shown_wrong(rid))
+        verdict = self.outage.assess(
+            fix, shown_wrong=self.integrity.fde.shown_wrong(rid), now_s=self.now_s
+        )
         outputs += verdict.alerts
         if not verdict.usable:
             self.stats.gnss[verdict.reason] += 1
@@ -452,8 +484,24 @@ class Engine:
                 self.outage.rejected(fix)
             outputs += self.integrity.on_fix(fix, meas, None, references=refs)
             return outputs
+        if self._bridge_cv and self.outage.mode in OUTAGE_MODES:
+            # the gap was carried by constant velocity: a fix that agrees with it ends the
+            # gap, and the blend, whose inertial prediction was judged worse, restarts there
+            navs.sync_fallback()
+            if navs.fallback.on_gnss(meas, gate=True).fused:
+                self._bridge_cv = False
+                return outputs + self._reset_to(fix, meas)
         predicted = self.bridge.reference(meas.t_s)
+        blend = navs.primary if navs.navigator is navs.primary else None
+        probing = isinstance(blend, BlendNavigator) and self.outage.mode in (
+            NavMode.NORMAL,
+            NavMode.DEGRADED,
+        )
+        if probing:
+            self.bridge_evidence.before_fusion(meas, blend)  # type: ignore[arg-type]
         update = navs.on_gnss(meas, verdict.gate)
+        if probing and update.fused:
+            self.bridge_evidence.after_fusion(meas, blend)  # type: ignore[arg-type]
         vouched = False
         if not update.fused and update.reason == "gate":
             self.stats.gnss["gate_rejected"] += 1
@@ -602,10 +650,16 @@ class Engine:
         if not navigator.initialised:
             return None
         t_s = max(t_s, self.now_s or t_s)
+        mode = self.outage.mode
+        if self._bridge_cv and mode in OUTAGE_MODES:
+            navs.sync_fallback()
+            fallback_state = navs.fallback.predict(t_s)
+            if fallback_state is not None:
+                return fallback_state
         state = navigator.predict(t_s)
         if state is None:
             return None
-        return self.bridge.carry(state, t_s, self.outage.mode, navigator is navs.fallback)
+        return self.bridge.carry(state, t_s, mode, navigator is navs.fallback)
 
     def _publish_on_fix(self, now_s: float) -> list[Output]:
         """A publication at ``now_s`` (``publish_on_fix``) and when the next one is due if

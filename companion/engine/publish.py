@@ -24,7 +24,7 @@ from companion.integrity.monitor import IntegrityMonitor
 from companion.nav.frames import LocalFrame
 from companion.nav.heading import HeadingCorrector
 from companion.nav.navigator import NavState
-from companion.nav.outage import OutageMonitor
+from companion.nav.outage import OUTAGE_MODES, OutageMonitor
 from companion.nav.rotations import wrap_2pi
 from companion.types import (
     FixType,
@@ -63,6 +63,8 @@ class Publisher:
         self._integrity = integrity
         self._bridge = bridge
         self._status_tick = -1
+        self._status_outage: bool | None = None
+        """Whether the last status values were published in an outage (None: none yet)."""
         self.last_fused_fix: GnssFix | None = None
         """The newest fix fused (or re-initialised from): its type bounds the published one."""
         self.satellites = 0
@@ -109,8 +111,12 @@ class Publisher:
             solution = integrity_lost(solution, integrity.accuracy_floor_m())
         outputs.insert(0, solution)
         status_tick = tick(t_s, self._status_rate_hz)
-        if status_tick > self._status_tick:
+        in_outage = mode in OUTAGE_MODES
+        # at the status rate, and at once when an outage begins or ends (CMP_OUTG must not
+        # say "outage" for a second after the fix that ended it)
+        if status_tick > self._status_tick or in_outage is not self._status_outage:
             self._status_tick = status_tick
+            self._status_outage = in_outage
             outputs += [
                 NamedValue(t_s, "CMP_HACC", solution.h_acc_m),
                 NamedValue(t_s, "CMP_VACC", solution.v_acc_m),

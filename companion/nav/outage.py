@@ -78,18 +78,22 @@ class OutageConfig:
     """Thresholds of the outage logic (all times on the autopilot clock)."""
 
     gnss_timeout_s: float = ranged(1.0, gt=0.0, finite=False)
-    """No usable fix for this long -> GNSS_LOST and BRIDGING. Five missed epochs at 5 Hz."""
+    """No usable fix for this long -> GNSS_LOST (mode BRIDGING). Five missed epochs at 5 Hz."""
     timeout_fix_intervals: float = ranged(1.5, ge=1.0)
     """A receiver slower than ``gnss_timeout_s`` allows (a telemetry link's 1 Hz) is late
     only after this many of its own fix intervals (the median of the last
-    :data:`FIX_INTERVALS_KEPT` between fused fixes): a fix that is merely not due yet is no
-    outage."""
+    :data:`FIX_INTERVALS_KEPT` between its consecutive fixes, late ones included: kept
+    between fused fixes only, the intervals that made it late would never count) plus
+    its fixes' usual delivery delay (the median age of a fix when it arrives, against the
+    newest sample time): a fix that is merely not due yet is no outage."""
     min_fix_type: int = ranged(int(FixType.FIX_3D), ge=0, le=int(FixType.PPP))
     """Fixes below this type are not usable (2-D fixes carry no height)."""
     max_bridge_s: float = ranged(120.0, gt=0.0, finite=False)
     """Bridging longer than this -> LOST (the published fix type drops to none)."""
     reacquire_fixes: int = ranged(3, ge=1)
-    """Consecutive fixes that must pass the gate after an outage before GNSS_BACK."""
+    """Consecutive fixes that must pass the gate after an outage before GNSS_BACK (one for a
+    receiver slower than ``gnss_timeout_s`` allows: three of its fixes would take longer
+    than most of its gaps, every one of them unused)."""
     reacquire_max_rejects: int = ranged(25, ge=1)
     """After this many consecutive gate rejections while reacquiring, the navigator is
     re-initialised from GNSS (its prediction, not the fixes, is then what is wrong)."""
@@ -185,7 +189,7 @@ class _ReceiverState:
 
 
 FIX_INTERVALS_KEPT = 20
-"""Intervals between fused fixes whose median sets a slow receiver's timeout."""
+"""Intervals between fixes (and delivery delays) whose medians set a slow receiver's timeout."""
 
 
 @dataclass(slots=True)
@@ -206,15 +210,20 @@ class OutageMonitor:
     """Resets of the navigator to a rejected receiver (bounded rejection)."""
     _median_fix_interval_s: float = 0.0
     _fix_intervals_s: deque[float] = field(default_factory=lambda: deque(maxlen=FIX_INTERVALS_KEPT))
+    _fix_ages_s: deque[float] = field(default_factory=lambda: deque(maxlen=FIX_INTERVALS_KEPT))
+    _median_fix_age_s: float = 0.0
     _reset_alerted_t_s: float = -math.inf
     _resets_unalerted: int = 0
 
     # ------------------------------------------------------------------ per fix
 
-    def assess(self, fix: GnssFix, *, shown_wrong: bool = False) -> FixAssessment:
+    def assess(
+        self, fix: GnssFix, *, shown_wrong: bool = False, now_s: float | None = None
+    ) -> FixAssessment:
         """Judge one fix by the receiver's own evidence (see the module docstring);
         ``shown_wrong``: an independent source (another receiver, an inertial reference)
-        shows this receiver wrong, so a rejection of it is never ended by a reset."""
+        shows this receiver wrong, so a rejection of it is never ended by a reset;
+        ``now_s``: the newest sample time before it (its delivery delay is kept)."""
         cfg = self.config
         rx = self._receivers.get(fix.receiver_id)
         if rx is None:
@@ -233,6 +242,10 @@ class OutageMonitor:
             return FixAssessment(False, "repeated", True, False, tuple(alerts))
         rx.checks.on_fix(fix, self._check_config())
         rx.last_fix = fix
+        self._fix_interval(rx, t)
+        if now_s is not None and math.isfinite(now_s):
+            self._fix_ages_s.append(max(0.0, now_s - t))
+            self._median_fix_age_s = statistics.median(self._fix_ages_s)
         stale_reason = self._stale_check(rx, fix, pos)
         rx.last_t_s = t
         rx.last_pos = pos
@@ -263,7 +276,12 @@ class OutageMonitor:
             reinit = bool(why)
         if not reinit and not alerts:
             return _USABLE  # the common verdict, shared (it is immutable)
-        if reinit:
+        if reinit and self.mode in OUTAGE_MODES and self.outage_start_t_s is not None:
+            # the reset ends an outage: its GNSS_BACK says "re-initialised" (one alert for
+            # one change, not a FAULT and a GNSS_BACK at the same instant)
+            self.resets += 1
+            log.warning("t=%.2f s: %s (ends the outage)", t, why)
+        elif reinit:
             alerts += self._reset_alert(t, why)
         return FixAssessment(True, "ok", not reinit, reinit, tuple(alerts))
 
@@ -332,7 +350,6 @@ class OutageMonitor:
                 self._gated_rejects += 1
                 self._gated_ok = 0
             return alerts
-        self._fix_interval(t_s)
         self.last_fused_t_s = t_s
         if self.mode is NavMode.INIT:
             self._set_mode(self._good_mode())
@@ -345,7 +362,7 @@ class OutageMonitor:
             self._gated_rejects = 0
         else:
             self._set_mode(self._good_mode())
-        if self.mode is NavMode.REACQUIRING and self._gated_ok >= self.config.reacquire_fixes:
+        if self.mode is NavMode.REACQUIRING and self._gated_ok >= self._reacquire_fixes():
             start = self.outage_start_t_s if self.outage_start_t_s is not None else t_s
             alerts.append(
                 Alert(t_s, AlertCode.GNSS_BACK, Severity.NOTICE, f"after {t_s - start:.1f} s")
@@ -354,14 +371,18 @@ class OutageMonitor:
             self._set_mode(self._good_mode())
         return alerts
 
-    def _fix_interval(self, t_s: float) -> None:
-        """Keep the interval since the last fused fix (not one spanning an outage) and
-        the timeout it implies."""
-        last = self.last_fused_t_s
-        if last is None or t_s <= last or self.mode not in (NavMode.NORMAL, NavMode.DEGRADED):
+    def _fix_interval(self, rx: _ReceiverState, t_s: float) -> None:
+        """Keep the interval since the receiver's previous fix and the timeout it implies."""
+        last = rx.last_t_s
+        if last is None or t_s <= last:
             return
         self._fix_intervals_s.append(t_s - last)
         self._median_fix_interval_s = statistics.median(self._fix_intervals_s)
+
+    def _reacquire_fixes(self) -> int:
+        """Gated fixes that end an outage: ``reacquire_fixes``, one for a slow receiver."""
+        cfg = self.config
+        return 1 if self.timeout_s > cfg.gnss_timeout_s else cfg.reacquire_fixes
 
     @property
     def median_fix_interval_s(self) -> float:
@@ -371,9 +392,11 @@ class OutageMonitor:
     @property
     def timeout_s(self) -> float:
         """The GNSS timeout in force: ``gnss_timeout_s``, or longer for a slow receiver
-        (``timeout_fix_intervals`` of its median fix interval)."""
+        (``timeout_fix_intervals`` of its median fix interval plus its fixes' median
+        delivery delay)."""
         cfg = self.config
-        return max(cfg.gnss_timeout_s, cfg.timeout_fix_intervals * self._median_fix_interval_s)
+        slow = cfg.timeout_fix_intervals * self._median_fix_interval_s + self._median_fix_age_s
+        return max(cfg.gnss_timeout_s, slow)
 
     def reinitialised(self, t_s: float) -> list[Alert]:
         """The engine re-initialised the navigator from a fix; GNSS_BACK if it ends an outage."""
@@ -402,10 +425,10 @@ class OutageMonitor:
             stale = any(r.stale for r in self._receivers.values())
             reason = "stale fixes" if stale else self._silence_reason(t_s)
             self.outage_start_t_s = self.last_fused_t_s
-            alerts.append(
-                Alert(t_s, AlertCode.GNSS_LOST, Severity.WARNING, f"{reason} {silent_s:.1f} s")
-            )
-            alerts.append(Alert(t_s, AlertCode.BRIDGING, Severity.WARNING, "position carried"))
+            # one alert per gap: the loss says the position is carried (no separate
+            # BRIDGING text: a pilot hears one message per change)
+            text = f"{reason} {silent_s:.1f} s: bridging"
+            alerts.append(Alert(t_s, AlertCode.GNSS_LOST, Severity.WARNING, text))
             self._gated_rejects = 0
             self._set_mode(NavMode.BRIDGING)
         if silent_s > cfg.max_bridge_s and self.mode in (NavMode.BRIDGING, NavMode.REACQUIRING):
@@ -434,6 +457,8 @@ class OutageMonitor:
         self._receivers.clear()
         self._fix_intervals_s.clear()
         self._median_fix_interval_s = 0.0
+        self._fix_ages_s.clear()
+        self._median_fix_age_s = 0.0
         self._gated_ok = 0
         self._gated_rejects = 0
         self._degraded = False

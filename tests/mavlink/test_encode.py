@@ -161,6 +161,28 @@ def test_statustext_format_truncation_and_rate_limit() -> None:
         assert len(enc2.encode(Alert(1.0, AlertCode.CAT, Severity.INFO), AutopilotFlavour.PX4)) == 1
 
 
+def test_a_change_of_state_is_sent_whatever_the_interval() -> None:
+    """GNSS lost, back and lost again within the interval: every change reaches the ground
+    (thinned, the second loss would leave the ground saying GNSS is back while it is
+    not); a repeat of the state last sent is still thinned."""
+    enc = Encoder(EncoderConfig(statustext_min_interval_s=5.0))
+    ap = AutopilotFlavour.ARDUPILOT
+    sent = [
+        bool(enc.encode(Alert(t, code, Severity.WARNING), ap))
+        for t, code in (
+            (10.0, AlertCode.GNSS_LOST),
+            (11.0, AlertCode.GNSS_BACK),
+            (12.0, AlertCode.GNSS_LOST),
+            (12.5, AlertCode.GNSS_LOST),
+            (13.0, AlertCode.NO_DATA),
+            (13.5, AlertCode.NO_DATA),
+            (14.0, AlertCode.DATA_BACK),
+        )
+    ]
+    assert sent == [True, True, True, False, True, False, True]
+    assert enc.suppressed == {"GNSS_LOST": 1, "NO_DATA": 1}
+
+
 def test_statustext_chunks_join_and_end() -> None:
     """An exact multiple of 50 ends on an empty chunk; over 200 characters is cut; the
     chunks join back through the read-back joiner."""

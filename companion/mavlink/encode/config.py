@@ -50,7 +50,8 @@ class EncoderConfig:
     autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
     be a deliberate choice."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
-    """Least time between two STATUSTEXTs of the same alert code, s."""
+    """Least time between two STATUSTEXTs of the same alert code, s (a change of state
+    within a family, e.g. GNSS_BACK then GNSS_LOST, is always sent)."""
     statustext_interval_overrides: tuple[tuple[str, float], ...] = ()
     """``((code, interval_s), ...)`` per-code exceptions."""
     dialect: str = "ardupilotmega"

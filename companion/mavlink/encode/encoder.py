@@ -91,6 +91,19 @@ def _clamp_int(v: float, lo: int, hi: int) -> int:
     return lo if v < lo else hi if v > hi else int(round(v))
 
 
+ALERT_FAMILIES: dict[AlertCode, str] = {
+    AlertCode.NO_GNSS: "gnss",
+    AlertCode.GNSS_LOST: "gnss",
+    AlertCode.GNSS_BACK: "gnss",
+    AlertCode.RTK_LOST: "rtk",
+    AlertCode.RTK_BACK: "rtk",
+    AlertCode.NO_DATA: "data",
+    AlertCode.DATA_BACK: "data",
+}
+"""Alerts that say one state (GNSS, RTK, the data streams): a change of it is always sent,
+whatever ``statustext_min_interval_s``; only repeats of the state last sent are thinned."""
+
+
 class Encoder:
     """Builds and packs the service's outgoing MAVLink messages.
 
@@ -118,6 +131,8 @@ class Encoder:
         self._has_integrity = hasattr(self._mod, "MAVLink_gnss_integrity_message")
         self._first_alt_mm: int | None = None
         self._last_alert_t: dict[AlertCode, float] = {}
+        self._family_state: dict[str, AlertCode] = {}
+        """The last code sent of each family of :data:`ALERT_FAMILIES`."""
         self._text_id = 0
         """Id of the last chunked STATUSTEXT (1..65535, wrapping)."""
         self._intervals = {
@@ -365,12 +380,19 @@ class Encoder:
 
     def _alert(self, alert: Alert) -> list[Any]:
         code = alert.code
+        family = ALERT_FAMILIES.get(code)
+        # a change of state within a family (GNSS lost -> back -> lost) is always sent: the
+        # interval only thins repeats of the state last sent, so the ground never keeps an
+        # older state than the service's
+        change = family is not None and self._family_state.get(family, code) is not code
         last = self._last_alert_t.get(code)
         interval = self._intervals.get(code, self.config.statustext_min_interval_s)
-        if last is not None and last <= alert.t_s < last + interval:
+        if not change and last is not None and last <= alert.t_s < last + interval:
             self.suppressed[code.value] += 1
             return []
         self._last_alert_t[code] = alert.t_s
+        if family is not None:
+            self._family_state[family] = code
         # STATUSTEXT is read as ASCII by most ground stations (pymavlink among them):
         # spell the few non-ASCII signs the alerts use, drop anything else
         plain = alert.text.translate(_ASCII_SPELLING)

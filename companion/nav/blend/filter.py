@@ -118,6 +118,11 @@ class BlendNavigator:
         self._att_t_s = math.nan
         self._att_corr: Quat = (1.0, 0.0, 0.0, 0.0)
         self._last_fuse_t_s = math.nan
+        self._fixes_moved_a = [0.0, 0.0, 0.0]
+        self._fixes_moved_b = [0.0, 0.0, 0.0]
+        self.generation = getattr(self, "generation", 0) + 1
+        """Changes whenever the state restarts or changes frame (an inertial-only prediction
+        kept from before is then meaningless)."""
         self._adaptive.reset()
         self.diag = BlendDiagnostics(accel_psd_ned=np.full(3, self._accel_psd0))
         self._model.reset(self.diag.accel_psd_ned)
@@ -354,6 +359,7 @@ class BlendNavigator:
         self._att_corr = quat_normalise(quat_mul(q_rot, self._att_corr))
         self._hist = deque([snapshot_of(mech, self._p)])
         self._last_fuse_t_s = math.nan
+        self.generation += 1
 
     # ------------------------------------------------------------------ diagnostics
 
@@ -381,6 +387,15 @@ class BlendNavigator:
     def attitude_q_nb(self) -> FloatArray:
         """Body-to-NED quaternion (w, x, y, z) in use, (4,)."""
         return np.array(self._mech.q_nb)
+
+    def fix_corrections(self) -> tuple[FloatArray, FloatArray]:
+        """What the fused fixes have done to the position since the last restart, as the
+        coefficients (a, b) of the shift a + b t they make at a time t after them (each
+        correction's position part, and its velocity part carried from its time), (3,) m
+        and m/s. Between two instants the change of the coefficients, evaluated at the
+        later, is what the fixes in between moved the position by: the position less
+        that is the inertial prediction from the earlier state alone."""
+        return np.array(self._fixes_moved_a), np.array(self._fixes_moved_b)
 
     @property
     def imu_t_s(self) -> float:
@@ -448,6 +463,12 @@ class BlendNavigator:
             d = dx.tolist()
         self._p = p
         mech.inject_values(d)
+        # what the fixes moved the state by, as a function of time: -d_p - d_v (t - t_m)
+        t_m = mech.t_s
+        a, b = self._fixes_moved_a, self._fixes_moved_b
+        for i in range(3):
+            a[i] += -d[i] + d[3 + i] * t_m
+            b[i] -= d[3 + i]
         if not self._strapdown:
             self._att_corr = rotate_by_rotvec(self._att_corr, d[6], d[7], d[8])
         if self._gm:
