@@ -221,6 +221,12 @@ class Pipeline:
         if count > 0:
             self.decoder.bad_frame(count)
 
+    def unknown_frames(self, count: int) -> None:
+        """The byte parser skipped ``count`` valid frames of message ids the dialect does not
+        know: counted ``unknown_message``, not corrupt."""
+        if count > 0:
+            self.decoder.unknown_frame(count)
+
     # ------------------------------------------------------------------ timer
 
     def next_due_s(self) -> float:

@@ -244,6 +244,12 @@ class Decoder:
         if count > 0:
             self._reject("corrupt_frame", count)
 
+    def unknown_frame(self, count: int = 1) -> None:
+        """Count ``count`` valid frames of message ids the dialect does not know (reason
+        ``unknown_message``: benign, not corrupt)."""
+        if count > 0:
+            self._reject("unknown_message", count)
+
     # ------------------------------------------------------------------ internals
 
     def _unhandled(
