@@ -51,6 +51,7 @@ from companion.mavlink.ids import (
 )
 from companion.mavlink.params import REQUEST_TYPES as PARAM_REQUEST_TYPES
 from companion.mavlink.params import decode_request as decode_param_request
+from companion.mavlink.px4_agp import Px4AgpSetup
 from companion.mavlink.streams import RateMonitor, stream_requests
 from companion.params import LIVE_KEYS, ParamServer
 from companion.types import (
@@ -173,6 +174,10 @@ class Pipeline:
         mapped onto the engine's while no sample comes."""
         self._inertial_clock = False
         """:attr:`_data_clock` is from an IMU or attitude sample (not a fix's validity time)."""
+        self.agp = Px4AgpSetup(self.config.encoder.gps_id)
+        """PX4's aux global position set-up: the GLOBAL_POSITION_SENSOR id read from the
+        autopilot (:mod:`companion.mavlink.px4_agp`)."""
+        self.encoder.agp_hold = True  # until the autopilot's id is read (or not answered)
 
     # ------------------------------------------------------------------ in
 
@@ -181,6 +186,8 @@ class Pipeline:
         self.stats.messages_in += 1
         if msg._type in PARAM_REQUEST_TYPES:
             return self._on_param_request(msg, t_rx_s)
+        if msg._type == "PARAM_VALUE" and self._feeds_px4():
+            return self._on_autopilot_param(msg)
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
             command = self.decoder.take_command()
@@ -197,6 +204,7 @@ class Pipeline:
             if kind is HeartbeatSample:
                 frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
             elif kind is RebootEvent:
+                self._restart_agp()
                 self._data_clock = None
                 self._inertial_clock = False
                 frames += self._request_streams()
@@ -214,6 +222,8 @@ class Pipeline:
         next_check_s = self._next_rate_check_s
         if next_check_s is None or samples[-1].t_s >= next_check_s:
             frames += self._check_rates(samples[-1].t_s)
+        if self.agp.verdict is None and self._autopilot is not None and self._feeds_px4():
+            frames += self._agp_requests(samples[-1].t_s)
         return frames
 
     def bad_frames(self, count: int) -> None:
@@ -331,6 +341,7 @@ class Pipeline:
         for block in changed:
             if block == "encoder":
                 self.encoder.reconfigure(config.encoder)
+                self.agp.configured_id = config.encoder.gps_id
             elif block == "link":
                 old_period_s = self._heartbeat_period_s
                 self._heartbeat_period_s = period_s = 1.0 / config.link.heartbeat_rate_hz
@@ -452,18 +463,69 @@ class Pipeline:
             self.encoder.system_id = self.decoder.system_id
         first = self._autopilot is None
         self._autopilot = (hb.system_id, 1)
+        if first:
+            self._restart_agp()
         return self._request_streams() if first else []
+
+    def _restart_agp(self) -> None:
+        """A new autopilot, or it rebooted: its aux global position set-up is read again;
+        until then the configured id, and no feedback guard."""
+        self.agp.restart()
+        self.encoder.agp_id = None
+        self.encoder.agp_hold = True
+        self.encoder.feedback_guard = False
+
+    def _feeds_px4(self) -> bool:
+        """The solution goes to PX4 as GLOBAL_POSITION_SENSOR."""
+        output = self.config.encoder.output
+        return output == "global_position_sensor" or (
+            output == "auto" and self.decoder.flavour is AutopilotFlavour.PX4
+        )
+
+    def _agp_requests(self, t_s: float | None) -> list[bytes]:
+        """PARAM_REQUEST_READs of PX4's aux global position parameters, when due."""
+        if self._autopilot is None:
+            return []
+        msgs = self.agp.requests(self.encoder.dialect_module, self._autopilot, t_s)
+        self.encoder.agp_hold = self.agp.waiting
+        return [self._pack(m) for m in msgs]
+
+    def _on_autopilot_param(self, msg: Any) -> list[bytes]:
+        """A PARAM_VALUE: from the autopilot, one of PX4's aux global position parameters
+        sets the GLOBAL_POSITION_SENSOR id; a problem is announced (``CMP AP_CONFIG``)."""
+        decoder = self.decoder
+        hdr = msg._header
+        if hdr.srcSystem != decoder.system_id or hdr.srcComponent != 1:
+            count_rejection(decoder.rejections, "unhandled_type")
+            return []
+        decoder.accepted["PARAM_VALUE"] += 1
+        verdict = self.agp.on_param_value(msg)
+        if verdict is None:
+            return []
+        self.encoder.agp_id = verdict.sensor_id
+        self.encoder.agp_hold = False
+        # what PX4 fuses must not be built on what PX4 derived from it
+        self.encoder.feedback_guard = verdict.fused
+        if verdict.problem is None:
+            return []
+        t_s = decoder.last_t_s
+        alert = Alert(
+            0.0 if t_s is None else t_s, AlertCode.AP_CONFIG, Severity.WARNING, verdict.problem
+        )
+        self.encoder.allow_next(alert.code)
+        return self._encode(alert)
 
     def _request_streams(self) -> list[bytes]:
         if self._autopilot is None:
             return []
+        frames = self._agp_requests(None) if self._feeds_px4() else []
         sysid, compid = self._autopilot
         msgs = stream_requests(sysid, compid, self.decoder.flavour, self.config.streams.rates_hz())
         self.stats.stream_requests += 1
         self.rates.reset()
         self._next_rate_check_s = None
         log.info("requested %d streams from autopilot %d", len(msgs), sysid)
-        return [self._pack(m) for m in msgs]
+        return [self._pack(m) for m in msgs] + frames
 
     def _check_rates(self, t_s: float) -> list[bytes]:
         """Warn (in the log) when a needed stream arrives below its requested rate;
