@@ -234,6 +234,8 @@ def summary(errs: list[tuple[float, float]]) -> dict[str, float | int]:
 def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[str, Any]:
     truth, px4_est, svc = Series(), Series(), Series()
     svc_eph: dict[float, float] = {}
+    svc_hacc = Series()
+    """The service's CMP_HACC (1-sigma horizontal accuracy, m) in its ``lat`` column."""
     svc_ids: set[int] = set()
     alerts: list[tuple[float, str]] = []
     truth_alt_m: list[float] = []
@@ -248,6 +250,8 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         kind = msg.get_type()
         if kind == "GLOBAL_POSITION_INT":
             svc.add(msg.time_boot_ms * 1e-3, msg.lat * 1e-7, msg.lon * 1e-7)
+        elif kind == "NAMED_VALUE_FLOAT" and msg.name == "CMP_HACC":
+            svc_hacc.add(msg.time_boot_ms * 1e-3, float(msg.value), 0.0)
         elif kind == "GLOBAL_POSITION_SENSOR":
             svc_eph[round(msg.time_usec * 1e-6, 3)] = float(msg.eph)
             svc_ids.add(int(msg.id))
@@ -312,11 +316,15 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     px4_cut = errors(px4_est, truth, t_cut, t_back)
     px4_after = errors(px4_est, truth, t_back, t_end)
     svc_all = errors(svc, truth, pre0, t_end)
+    # the published accuracy: CMP_HACC (1 Hz, also through the cut, when PX4 gets no
+    # GLOBAL_POSITION_SENSOR), the latest one at or before each position (it only grows
+    # through a gap, so the earlier value is the stricter test)
     covered = []
     for t, e in svc_all:
-        eph = svc_eph.get(round(t, 3))
-        if eph is not None:
-            covered.append((t, e, eph, e <= COVER_95_2D * eph))
+        i = bisect.bisect_right(svc_hacc.t, t) - 1
+        if i >= 0 and t - svc_hacc.t[i] <= 1.5:
+            acc = svc_hacc.lat[i]
+            covered.append((t, e, acc, e <= COVER_95_2D * acc))
     pre_max = max((e for _, e in px4_pre), default=math.nan)
     # when PX4's error is back under its pre-cut maximum for good, s after GNSS returned
     back_under_s = math.nan
