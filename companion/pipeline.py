@@ -269,14 +269,15 @@ class Pipeline:
         ap = self.autopilot_params
         encoder = self.encoder
         instance = ap.mav_gps_instance
-        if self.config.encoder.gps_id_from_autopilot and instance != encoder.gps_id_override:
-            encoder.gps_id_override = instance
-            if instance is not None:
+        wanted = instance if self.config.encoder.gps_id_from_autopilot else None
+        if wanted != encoder.gps_id_override:
+            encoder.gps_id_override = wanted
+            if wanted is not None:
                 log.info(
                     "autopilot GPS %d takes GPS_INPUT (GPS%d_TYPE 14): sending gps_id %d",
-                    instance + 1,
-                    instance + 1,
-                    instance,
+                    wanted + 1,
+                    wanted + 1,
+                    wanted,
                 )
         feeds = self.config.encoder.output in ("auto", "gps_input")
         gnss = self.decoder.gnss
@@ -287,7 +288,9 @@ class Pipeline:
             gnss.injected_receiver = injected
             if injected is not None:
                 log.info(
-                    "GPS%d_RAW is our own GPS_INPUT reported back: not a receiver", injected + 1
+                    "GPS %d reports our own GPS_INPUT back (%s): not a receiver",
+                    injected + 1,
+                    "GPS_RAW_INT" if injected == 0 else "GPS2_RAW",
                 )
         for receiver in (0, 1):
             delay_s = ap.gps_delay_s(receiver)
@@ -424,6 +427,7 @@ class Pipeline:
         for block in changed:
             if block == "encoder":
                 self.encoder.reconfigure(config.encoder)
+                frames += self._apply_autopilot_params()
             elif block == "link":
                 old_period_s = self._heartbeat_period_s
                 self._heartbeat_period_s = period_s = 1.0 / config.link.heartbeat_rate_hz

@@ -109,3 +109,15 @@ def test_gps_lag_from_the_autopilot() -> None:
     p.on_message(_param("GPS1_DELAY_MS", 120.0), 0.1)
     fixes = p.decoder.decode(AP.parsed(gps_raw(10_100_000)), 0.2)
     assert [round(f.t_s, 6) for f in fixes] == [9.98]
+
+
+def test_gps_id_from_autopilot_turned_off_live() -> None:
+    import dataclasses
+
+    p, _ = _started()
+    p.on_message(_param("GPS2_TYPE", 14.0), 0.1)
+    assert p.encoder.gps_id == 1
+    encoder = dataclasses.replace(p.config.encoder, gps_id_from_autopilot=False)
+    p.reconfigure(dataclasses.replace(p.config, encoder=encoder))
+    assert p.encoder.gps_id == 0  # the configured id again
+    assert p.decoder.gnss.injected_receiver is None  # GPS 2 is no longer fed by us
