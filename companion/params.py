@@ -323,6 +323,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("OUT_MAX_HDOP", "outage.max_hdop"),
     ("OUT_CONTRA_SIG", "outage.contradiction_sigmas"),
     ("OUT_TIMEOUT_NFIX", "outage.timeout_fix_intervals"),
+    ("ENC_GPS_ID_AUTO", "encoder.gps_id_from_autopilot"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

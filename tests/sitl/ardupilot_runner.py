@@ -254,7 +254,6 @@ def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
             out["events"].append({"kind": kind, "t_back_s": t_back, "resume_delay_s": delay})
             gcs.sleep(5.0)
         out["companion_alive"] = procs.alive("companion")
-        out["companion_starts"] = procs.tail("companion", 100000).count("companion starting")
     finally:
         gcs.close()
         procs.stop("companion")

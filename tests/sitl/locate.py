@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shutil
 from pathlib import Path
+from typing import Any
 
 PROJECT_ROOT = Path(__file__).resolve().parents[2]
 ENV_VAR = "COMPANION_SITL_DIR"
@@ -35,3 +36,11 @@ def missing(*binaries: str) -> str | None:
     if hasattr(os, "geteuid") and os.geteuid() != 0:
         return "private-net needs root (a private network namespace)"
     return None
+
+
+def skip_unless(*binaries: str) -> Any:
+    """A pytest ``skipif`` mark: skipped, with the reason, when :func:`missing` says so."""
+    import pytest
+
+    reason = missing(*binaries)
+    return pytest.mark.skipif(reason is not None, reason=reason or "")

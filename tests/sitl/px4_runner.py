@@ -217,9 +217,7 @@ def px4_aux_fused(workdir: Path) -> list[tuple[float, bool]]:
             t_s = data.data["timestamp"] * 1e-6
             on = data.data["cs_aux_gpos"]
             return [
-                (float(t_s[i]), bool(on[i]))
-                for i in range(len(on))
-                if i == 0 or on[i] != on[i - 1]
+                (float(t_s[i]), bool(on[i])) for i in range(len(on)) if i == 0 or on[i] != on[i - 1]
             ]
     return []
 

@@ -120,8 +120,8 @@ class Decoder:
         c = self.config
         self._clock = clock = BootClock(c)
         self._vehicle = vehicle = VehicleDecoder(c, clock)
-        gnss = GnssDecoder(c, clock)
-        inertial = InertialDecoder(c, clock)
+        self.gnss = gnss = GnssDecoder(c, clock)
+        self.inertial = inertial = InertialDecoder(c, clock)
         self._own_comp = c.own_component
         self._pending_command: DecodedCommand | None = None
         self._handlers: dict[int, Callable[[Any, float], Sample | None]] = {

@@ -115,6 +115,9 @@ class Encoder:
 
     def __init__(self, config: EncoderConfig | None = None, system_id: int = 1) -> None:
         self.config = config if config is not None else EncoderConfig()
+        self.gps_id_override: int | None = None
+        """The id the autopilot's parameters call for (``gps_id_from_autopilot``), set by
+        the pipeline; None: ``config.gps_id``."""
         self._mod = load_dialect(self.config.dialect)
         self._packer = Packer(self._mod, MAV_COMP_ID_ONBOARD_COMPUTER)
         self._pack_args = self._packer.pack_args
@@ -157,6 +160,12 @@ class Encoder:
         if not 1 <= int(value) <= 255:
             raise ValueError(f"system_id must be in 1..255, got {value}")
         self._packer.mav.srcSystem = int(value)
+
+    @property
+    def gps_id(self) -> int:
+        """The id sent in GPS_INPUT, GLOBAL_POSITION_SENSOR and GNSS_INTEGRITY."""
+        override = self.gps_id_override
+        return self.config.gps_id if override is None else override
 
     def reconfigure(self, config: EncoderConfig) -> None:
         """Encode with ``config`` from the next message on; only the keys of
@@ -339,7 +348,7 @@ class Encoder:
                     self._gps_input_cls,
                     (
                         round(sol.t_s * _US_PER_S),
-                        cfg.gps_id,
+                        self.gps_id,
                         0,  # ignore_flags: every field is provided
                         0,  # time_week_ms: no GPS time
                         0,  # time_week: 0 disables ArduPilot's jitter correction
@@ -373,7 +382,7 @@ class Encoder:
                     (
                         self.system_id,
                         MAV_COMP_ID_AUTOPILOT1,
-                        cfg.gps_id if self.agp_id is None else self.agp_id,
+                        self.gps_id if self.agp_id is None else self.agp_id,
                         round(sol.t_s * units.US_PER_S),
                         0,
                         GLOBAL_POSITION_SRC_ESTIMATOR,
@@ -453,7 +462,7 @@ class Encoder:
         ok = rep.integrity_ok and not rep.fault_detected
         return [
             self._mod.MAVLink_gnss_integrity_message(
-                self.config.gps_id,
+                self.gps_id,
                 0,
                 0,
                 0,
