@@ -54,6 +54,12 @@ def main(argv: list[str] | None = None) -> int:
         help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms",
     )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
+    p.add_argument(
+        "--px4-runs",
+        type=int,
+        default=1,
+        help="PX4 SIH GNSS-cut flights with and without the service (bench/sitl_px4.py); 0: none",
+    )
     args = p.parse_args(argv)
     reason = missing("arduplane")
     if reason:
@@ -120,8 +126,15 @@ def main(argv: list[str] | None = None) -> int:
             f"{event['kind']:8s}: publishing resumed "
             f"{'never' if delay is None else f'{delay:.1f} s'} after the autopilot was back"
         )
+    if args.px4_runs > 0 and missing("px4/run-sih.sh", "px4/bin/px4") is None:
+        from bench.sitl_px4 import print_px4, run_px4
+
+        print()
+        px4 = run_px4(args.px4_runs, 20.0, 10.0)
+        print_px4(px4, 20.0)
+        results["px4 gnss cut"] = px4  # type: ignore[assignment]
     if args.json:
-        args.json.write_text(json.dumps(results, indent=1))
+        args.json.write_text(json.dumps(results, indent=1, default=str))
     return 0
 
 
