@@ -152,9 +152,13 @@ def score_flight(
             raise RuntimeError(f"outage not found in the log's PARM records: {gps}")
         lost = [t for t in tap.alert_times("GNSS_LOST") if t >= t_off - 1.0]
         back = [t for t in tap.alert_times("GNSS_BACK") if t >= t_on - 1.0]
+        ap_times = [t_off] + [t for t in log.autopilot.t_s if t_off <= t <= t_on] + [t_on]
         out["outage"] = {
             "t_off_s": t_off,
             "t_on_s": t_on,
+            "autopilot_max_gap_s": max(
+                b - a for a, b in zip(ap_times[:-1], ap_times[1:], strict=True)
+            ),
             "service": _stats(log.errors(service, t_off, t_on)),
             "autopilot": _stats(log.errors(log.autopilot, t_off, t_on)),
             "gnss_lost_latency_s": (lost[0] - t_off) if lost else None,
