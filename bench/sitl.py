@@ -1,5 +1,6 @@
 """The service beside ArduPilot SITL: its error against the autopilot's own, and its
-alert latencies, on the scenarios of ``tests/sitl`` flown longer.
+alert latencies, on the scenarios of ``tests/sitl`` (ArduPlane and ArduCopter mission
+circuits with a GPS outage, a reboot and a restart) flown longer.
 
 Runs ``tests.sitl.ardupilot_runner`` inside ``private-net`` (the simulators are found
 in ``../shared/sitl`` or ``$COMPANION_SITL_DIR``; nothing runs without them) and prints
@@ -42,6 +43,35 @@ def _latency(value: float | None) -> str:
     return "missed" if value is None else f"{value:.2f} s"
 
 
+def _print_flight(name: str, flight: dict[str, Any]) -> None:
+    healthy, outage = flight["healthy"], flight["outage"]
+    print(f"\n{name}")
+    print(f"  {'phase':30s} {'service':>22s} {'autopilot EKF3':>22s}")
+    span = healthy["t1_s"] - healthy["t0_s"]
+    rows = [
+        (f"healthy cruise ({span:.0f} s)", healthy),
+        (f"GPS outage ({outage['t_on_s'] - outage['t_off_s']:.0f} s)", outage),
+        ("after GPS returns (+5 s on)", flight["after"]),
+    ]
+    for label, sec in rows:
+        print(f"  {label:30s} {_fmt(sec['service']):>22s} {_fmt(sec['autopilot']):>22s}")
+    print(
+        f"  the autopilot published no position for {outage['autopilot_max_gap_s']:.1f} s "
+        "of the outage (longest gap)"
+    )
+    print(
+        f"  GNSS_LOST {_latency(outage['gnss_lost_latency_s'])} after the GPS went off, "
+        f"GNSS_BACK {_latency(outage['gnss_back_latency_s'])} after it returned"
+    )
+    unwanted = [(t, a) for t, a in healthy["alerts"] if a.split()[1] in UNWANTED]
+    print(f"  unwanted alerts in the healthy cruise: {len(unwanted)}")
+    for t, a in unwanted[:10]:
+        print(f"    {t:8.2f} s  {a}")
+    print("  alerts from the GPS cut on:")
+    for t, a in outage["alerts"]:
+        print(f"    {t:8.2f} s  {a}")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--speedup", type=float, default=4.0)
@@ -81,45 +111,31 @@ def main(argv: list[str] | None = None) -> int:
                 "--params",
                 args.params,
             ],
+            "copter circuit": [
+                "flight",
+                "--vehicle",
+                "copter",
+                "--speedup",
+                f"{args.speedup:g}",
+                "--cruise-s",
+                f"{min(args.cruise_s, 120.0):g}",
+                "--outage-s",
+                f"{args.outage_s:g}",
+                "--after-s",
+                "20",
+                "--params",
+                args.params,
+            ],
             "plane reboot": ["reboot", "--speedup", "1"],
         }
         for name, run_args in runs.items():
             out = Path(tmp) / f"{name.replace(' ', '_')}.json"
             timeout_s = 120.0 + 3.0 * (args.cruise_s + args.outage_s + args.after_s + 120.0)
             results[name] = run_scenario(RUNNER, run_args, out, timeout_s=timeout_s)
-    flight = results["plane circuit"]
-    healthy, outage = flight["healthy"], flight["outage"]
-    print(
-        f"ArduPlane SITL, mission circuit at 80 m, speed-up {args.speedup:g}, "
-        f"autopilot parameters {args.params}"
-    )
+    print(f"autopilot parameters {args.params}, speed-up {args.speedup:g}")
     print("horizontal error vs SITL truth, m: mean / p95 / max")
-    print(f"{'phase':32s} {'service':>22s} {'autopilot EKF3':>22s}")
-    span = healthy["t1_s"] - healthy["t0_s"]
-    print(
-        f"{f'healthy cruise ({span:.0f} s)':32s} {_fmt(healthy['service']):>22s} "
-        f"{_fmt(healthy['autopilot']):>22s}"
-    )
-    span = outage["t_on_s"] - outage["t_off_s"]
-    print(
-        f"{f'GPS outage ({span:.0f} s)':32s} {_fmt(outage['service']):>22s} "
-        f"{_fmt(outage['autopilot']):>22s}"
-    )
-    print(
-        f"{'after GPS returns (+5 s on)':32s} {_fmt(flight['after']['service']):>22s} "
-        f"{_fmt(flight['after']['autopilot']):>22s}"
-    )
-    print(
-        f"GNSS_LOST {_latency(outage['gnss_lost_latency_s'])} after the GPS went off, "
-        f"GNSS_BACK {_latency(outage['gnss_back_latency_s'])} after it returned"
-    )
-    unwanted = [(t, a) for t, a in healthy["alerts"] if a.split()[1] in UNWANTED]
-    print(f"unwanted alerts in the healthy cruise: {len(unwanted)}")
-    for t, a in unwanted[:10]:
-        print(f"  {t:8.2f} s  {a}")
-    print("alerts from the GPS cut on:")
-    for t, a in outage["alerts"]:
-        print(f"  {t:8.2f} s  {a}")
+    for name in ("plane circuit", "copter circuit"):
+        _print_flight(name, results[name])
     for event in results["plane reboot"]["events"]:
         delay = event["resume_delay_s"]
         print(

@@ -200,8 +200,14 @@ class Pipeline:
             return self._on_autopilot_param(msg)
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
-            command = self.decoder.take_command()
-            return [] if command is None else self._answer(command, None, t_rx_s)
+            early: list[bytes] = []
+            decoder = self.decoder
+            if self._autopilot is None and decoder.autopilot_heartbeats and decoder.system_id:
+                # the autopilot's HEARTBEAT before any timed message (ArduCopter sends none
+                # on a port until asked): ask for the streams now, or nothing ever comes
+                early = self._on_autopilot_heartbeat(decoder.system_id)
+            command = decoder.take_command()
+            return early if command is None else early + self._answer(command, None, t_rx_s)
         frames: list[bytes] = []
         handle = self.engine.handle
         for sample in samples:
@@ -212,7 +218,7 @@ class Pipeline:
                     frames += self._answer(command, sample, t_rx_s)  # type: ignore[arg-type]
                 continue
             if kind is HeartbeatSample:
-                frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
+                frames += self._on_autopilot_heartbeat(sample.system_id)  # type: ignore[union-attr]
             elif kind is RebootEvent:
                 self._restart_agp()
                 self._data_clock = None
@@ -561,11 +567,11 @@ class Pipeline:
         stats.out_by_type[msg._type] += 1
         return self.encoder.pack(msg)
 
-    def _on_autopilot_heartbeat(self, hb: HeartbeatSample) -> list[bytes]:
+    def _on_autopilot_heartbeat(self, system_id: int) -> list[bytes]:
         if self.decoder.system_id is not None and self.encoder.system_id != self.decoder.system_id:
             self.encoder.system_id = self.decoder.system_id
         first = self._autopilot is None
-        self._autopilot = (hb.system_id, 1)
+        self._autopilot = (system_id, 1)
         if first:
             self._restart_agp()
         return self._request_streams() if first else []

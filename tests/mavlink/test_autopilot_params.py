@@ -121,3 +121,14 @@ def test_gps_id_from_autopilot_turned_off_live() -> None:
     p.reconfigure(dataclasses.replace(p.config, encoder=encoder))
     assert p.encoder.gps_id == 0  # the configured id again
     assert p.decoder.gnss.injected_receiver is None  # GPS 2 is no longer fed by us
+
+
+def test_streams_requested_on_a_heartbeat_before_any_time() -> None:
+    """ArduCopter sends nothing timed on a port until asked: the first HEARTBEAT (no
+    clock yet, no sample) must already bring the stream requests."""
+    p = Pipeline()
+    out = _msgs(p.on_message(AP.parsed(heartbeat(3)), 0.0))
+    assert any(
+        m.get_type() == "COMMAND_LONG" and m.command == MAV_CMD_SET_MESSAGE_INTERVAL for m in out
+    )
+    assert _msgs(p.on_message(AP.parsed(heartbeat(3)), 1.0)) == []  # once

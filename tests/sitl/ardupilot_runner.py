@@ -4,7 +4,8 @@
 Scenarios:
 
 * ``flight``: ArduPlane takes off on a mission circuit (a rectangle, 900 x 600 m, flown
-  in a loop), cruises with a healthy GPS for ``--cruise-s``, then (``--outage-s`` > 0)
+  in a loop; ``--vehicle copter``: ArduCopter, a guided take-off to 25 m, then a
+  200 x 120 m rectangle), cruises with a healthy GPS for ``--cruise-s``, then (``--outage-s`` > 0)
   loses GPS 1 (``SIM_GPS1_ENABLE = 0``) for that long and flies ``--after-s`` more.
   Scored from SITL's DataFlash log: the service's and the autopilot's (POS, EKF3)
   horizontal errors against the simulator's truth (SIM) over the healthy cruise and over
@@ -37,6 +38,8 @@ from tests.sitl.harness import GroundStation, Processes, ServiceTap
 
 MAV = mavutil.mavlink
 PLANE_AUTO = 10
+COPTER_AUTO, COPTER_GUIDED = 3, 4
+COPTER_ALT_M = 25.0
 HOME_LAT, HOME_LON, HOME_ALT = -35.363261, 149.165230, 584.0
 CRUISE_ALT_M = 80.0
 ALERT_CODES = (
@@ -75,6 +78,32 @@ def plane_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, flo
         corner(700, 520),
         corner(-200, 520),
         corner(-200, -80),
+        (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
+    ]
+
+
+def copter_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, float]]:
+    """Home, a take-off to 25 m and a 200 x 120 m rectangle flown in a loop."""
+    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def corner(n: float, e: float) -> tuple[int, int, tuple[float, ...], float, float, float]:
+        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
+        return (rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, COPTER_ALT_M)
+
+    return [
+        (
+            MAV.MAV_FRAME_GLOBAL,
+            MAV.MAV_CMD_NAV_WAYPOINT,
+            (0, 0, 0, 0),
+            HOME_LAT,
+            HOME_LON,
+            HOME_ALT,
+        ),
+        (rel, MAV.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0), HOME_LAT, HOME_LON, COPTER_ALT_M),
+        corner(100, 0),
+        corner(100, 120),
+        corner(-100, 120),
+        corner(-100, 0),
         (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
     ]
 
@@ -123,9 +152,13 @@ def score_flight(
             raise RuntimeError(f"outage not found in the log's PARM records: {gps}")
         lost = [t for t in tap.alert_times("GNSS_LOST") if t >= t_off - 1.0]
         back = [t for t in tap.alert_times("GNSS_BACK") if t >= t_on - 1.0]
+        ap_times = [t_off] + [t for t in log.autopilot.t_s if t_off <= t <= t_on] + [t_on]
         out["outage"] = {
             "t_off_s": t_off,
             "t_on_s": t_on,
+            "autopilot_max_gap_s": max(
+                b - a for a, b in zip(ap_times[:-1], ap_times[1:], strict=True)
+            ),
             "service": _stats(log.errors(service, t_off, t_on)),
             "autopilot": _stats(log.errors(log.autopilot, t_off, t_on)),
             "gnss_lost_latency_s": (lost[0] - t_off) if lost else None,
@@ -141,7 +174,7 @@ def score_flight(
 
 def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
     tap = ServiceTap()
-    harness.start_ardupilot(procs, "plane", args.speedup)
+    harness.start_ardupilot(procs, args.vehicle, args.speedup)
     config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
     harness.start_companion(procs, config)
     gcs = GroundStation()
@@ -152,16 +185,25 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         gcs.set_param("SIM_GPS1_ENABLE", 1)
         for name, value in json.loads(args.params).items():
             gcs.set_param(name, float(value))
-        gcs.upload_mission(plane_circuit())
-        gcs.set_mode(PLANE_AUTO)
-        gcs.arm()
-        t_armed = gcs.now()
 
         def rel_alt() -> float:
             gpi = gcs.latest.get("GLOBAL_POSITION_INT")
             return -1.0 if gpi is None else gpi.relative_alt / 1000.0
 
-        gcs.wait_until(lambda: rel_alt() > 35.0, 120.0, "take-off to 35 m")
+        if args.vehicle == "plane":
+            gcs.upload_mission(plane_circuit())
+            gcs.set_mode(PLANE_AUTO)
+            gcs.arm()
+            t_armed = gcs.now()
+            gcs.wait_until(lambda: rel_alt() > 35.0, 120.0, "take-off to 35 m")
+        else:  # copter: a guided take-off, then the mission
+            gcs.upload_mission(copter_circuit())
+            gcs.set_mode(COPTER_GUIDED)
+            gcs.arm()
+            t_armed = gcs.now()
+            gcs.command(MAV.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, COPTER_ALT_M)
+            gcs.wait_until(lambda: rel_alt() > COPTER_ALT_M - 3.0, 120.0, "take-off")
+            gcs.set_mode(COPTER_AUTO)
         gcs.sleep(args.settle_s)
         t_cruise = gcs.now()
         gcs.sleep(args.cruise_s)
@@ -267,6 +309,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("scenario", choices=["flight", "reboot"])
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--vehicle", choices=["plane", "copter"], default="plane")
     p.add_argument("--speedup", type=float, default=4.0)
     p.add_argument("--settle-s", type=float, default=20.0, help="after take-off, before scoring")
     p.add_argument("--cruise-s", type=float, default=60.0)

@@ -334,12 +334,17 @@ class GroundStation:
 
     def wait_booted(self, ap_timeout_s: float = 60.0) -> None:
         deadline = time.monotonic() + 120.0
-        while self.heartbeat is None or self.ap_time_s < 0.0:
+        while self.heartbeat is None:
             if time.monotonic() > deadline:
-                raise TimeoutError("no autopilot HEARTBEAT with a clock")
+                raise TimeoutError("no autopilot HEARTBEAT")
             time.sleep(0.1)
+        # ArduCopter sends nothing timed on a port until asked
         self.set_message_rate("SYSTEM_TIME", 10.0)
         self.set_message_rate("ATTITUDE", 10.0)
+        while self.ap_time_s < 0.0:
+            if time.monotonic() > deadline:
+                raise TimeoutError("no autopilot clock (SYSTEM_TIME, ATTITUDE)")
+            time.sleep(0.1)
 
     # -- commands and parameters ----------------------------------------------------------
 

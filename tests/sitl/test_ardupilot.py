@@ -92,6 +92,57 @@ def test_plane_gps_outage(plane_flight: dict[str, Any]) -> None:
     assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
 
 
+@pytest.fixture(scope="module")
+def copter_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out = tmp_path_factory.mktemp("sitl") / "copter.json"
+    args = [
+        "flight",
+        "--vehicle",
+        "copter",
+        "--speedup",
+        f"{SPEEDUP:g}",
+        "--settle-s",
+        "15",
+        "--cruise-s",
+        "60",
+        "--outage-s",
+        f"{OUTAGE_S:g}",
+        "--after-s",
+        "20",
+        "--params",
+        '{"GPS1_DELAY_MS": 100}',
+    ]
+    return run_scenario(RUNNER, args, out, timeout_s=600.0)
+
+
+def test_copter_mission_healthy(copter_flight: dict[str, Any]) -> None:
+    healthy = copter_flight["healthy"]
+    assert _alerts(healthy, "GNSS_STALE", "GNSS_LOST", "FAULT", "BRIDGING") == []
+    svc, ap = healthy["service"], healthy["autopilot"]
+    assert svc["n"] > 0.8 * 10 * 60.0
+    assert svc["mean_m"] <= ap["mean_m"], (svc, ap)
+    assert svc["p95_m"] <= ap["p95_m"], (svc, ap)
+
+
+def test_copter_gps_outage(copter_flight: dict[str, Any]) -> None:
+    """ArduCopter's EKF3 gives up a few seconds into the outage (EKF failsafe: LAND, no
+    position for most of it): the service must publish throughout and announce both
+    ends in time. (Its error over the outage, 5 m mean / 16 m max in a measured run, is
+    in ``python bench/sitl.py``'s figures, not compared: EKF3 has no position to compare.)"""
+    outage = copter_flight["outage"]
+    assert outage["service"]["n"] >= 0.9 * 10 * OUTAGE_S
+    assert outage["gnss_lost_latency_s"] is not None
+    assert 0.0 <= outage["gnss_lost_latency_s"] <= 1.5
+    assert outage["gnss_back_latency_s"] is not None
+    assert 0.0 <= outage["gnss_back_latency_s"] <= 1.5
+    between = [
+        (t, a)
+        for t, a in outage["alerts"]
+        if outage["t_off_s"] + outage["gnss_lost_latency_s"] < t < outage["t_on_s"]
+    ]
+    assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
+
+
 def test_plane_reboot_and_restart(tmp_path: Path) -> None:
     result = run_scenario(
         RUNNER, ["reboot", "--speedup", "1"], tmp_path / "reboot.json", timeout_s=300.0
