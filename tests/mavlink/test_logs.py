@@ -101,7 +101,7 @@ def test_replay_of_the_originals_publishes(tmp_path):
     assert summary.out_by_type.get("GLOBAL_POSITION_INT", 0) > 0
     # PX4's aux position id is asked for; the 6.5 s log holds no answer, and nothing goes
     # to PX4 before it is known (or, unanswered, 15-20 s later: companion.mavlink.px4_agp)
-    assert summary.out_by_type.get("PARAM_REQUEST_READ", 0) == 2
+    assert summary.out_by_type.get("PARAM_REQUEST_READ", 0) >= 2  # with each stream request
     assert summary.out_by_type.get("GLOBAL_POSITION_SENSOR", 0) == 0
     assert summary.rejections.get("no_system_yet", 0) > 0  # before the first HEARTBEAT
 
