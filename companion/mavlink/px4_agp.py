@@ -49,7 +49,7 @@ NAMES = (AGP_ID, AGP_CTRL)
 AGP_CTRL_HPOS = 0x1
 """EKF2_AGP0_CTRL bit 0: fuse the horizontal position."""
 MAV_PARAM_TYPE_REAL32 = 9
-RETRY_S = 5.0
+RETRY_S = 1.0
 """Unanswered requests are sent again after this long (autopilot time, s)..."""
 MAX_TIMED_RETRIES = 3
 """... this many times after each untimed request; then a warning, and the configured id."""

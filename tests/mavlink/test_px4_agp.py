@@ -11,7 +11,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.config import Config
 from companion.mavlink.encode import EncoderConfig
-from companion.mavlink.px4_agp import Px4AgpSetup, px4_int
+from companion.mavlink.px4_agp import RETRY_S, Px4AgpSetup, px4_int
 from companion.pipeline import Pipeline
 from companion.types import AutopilotFlavour, NavMode
 from tests.mavlink._util import Packer, attitude, heartbeat
@@ -88,9 +88,9 @@ def test_requests_are_repeated_until_answered() -> None:
     setup = Px4AgpSetup(0)
     assert len(setup.requests(apm, (1, 1), None)) == 2
     assert setup.requests(apm, (1, 1), 1.0) == []  # the retry clock starts
-    assert setup.requests(apm, (1, 1), 5.9) == []
-    assert len(setup.requests(apm, (1, 1), 6.0)) == 2
-    assert setup.requests(apm, (1, 1), 7.0) == []
+    assert setup.requests(apm, (1, 1), 0.99 + RETRY_S) == []
+    assert len(setup.requests(apm, (1, 1), 1.0 + RETRY_S)) == 2
+    assert setup.requests(apm, (1, 1), 1.5 + RETRY_S) == []
 
 
 def test_nothing_goes_to_px4_before_its_id_is_read_then_the_configured_id() -> None:
