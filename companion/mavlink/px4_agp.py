@@ -17,8 +17,8 @@ Feeding an autopilot that feeds us: with the fusion on, PX4 gets nothing from a 
 gap's start until GNSS is trusted again (the encoder's ``feedback_guard``). Bridged, the
 solution rests on PX4's attitude and IMU; fused back, PX4 corrects that attitude with it
 and the errors feed on themselves while each side takes the other for independent
-(measured before this guard: PX4 15-16 m off after a 20 s cut where it alone was 5 m
-off). A bridge on the raw IMU alone is no remedy with an autopilot-grade MEMS IMU: the
+(reported on PX4 SIH before this guard: PX4 15-16 m off after a 20 s cut where it alone
+was 5 m off). A bridge on the raw IMU alone is no remedy with an autopilot-grade MEMS IMU: the
 blend coasting on its gyros without the autopilot's attitude was 350 m off after 60 s
 on the bundled cruise flight, against 8 m on the autopilot's attitude.
 
