@@ -105,8 +105,6 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SR_GLOBAL_POS", "streams.global_position_int_hz"),
     # [engine]
     ("ENG_PUB_RATE", "engine.publish_rate_hz"),
-    ("ENG_PUB_ON_FIX", "engine.publish_on_fix"),
-    ("ENG_PUB_MIN_INT", "engine.min_publish_interval_s"),
     ("ENG_STATUS_RATE", "engine.status_rate_hz"),
     ("ENG_REANCHOR", "engine.reanchor_distance_m"),
     ("ENG_NAVIGATOR", "engine.navigator"),
@@ -325,6 +323,9 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("OUT_MAX_HDOP", "outage.max_hdop"),
     ("OUT_CONTRA_SIG", "outage.contradiction_sigmas"),
     ("OUT_TIMEOUT_NFIX", "outage.timeout_fix_intervals"),
+    ("ENC_GPS_ID_AUTO", "encoder.gps_id_from_autopilot"),
+    ("ENG_PUB_ON_FIX", "engine.publish_on_fix"),
+    ("ENG_PUB_MIN_INT", "engine.min_publish_interval_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

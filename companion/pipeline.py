@@ -35,6 +35,7 @@ from typing import Any
 
 from companion.config import Config
 from companion.engine import Engine
+from companion.mavlink.autopilot_params import AutopilotParams
 from companion.mavlink.commands import DecodedCommand, Retransmissions
 from companion.mavlink.decode import Decoder
 from companion.mavlink.decode.rejections import Rejected, count_rejection
@@ -51,7 +52,8 @@ from companion.mavlink.ids import (
 )
 from companion.mavlink.params import REQUEST_TYPES as PARAM_REQUEST_TYPES
 from companion.mavlink.params import decode_request as decode_param_request
-from companion.mavlink.streams import RateMonitor, stream_requests
+from companion.mavlink.px4_agp import Px4AgpSetup
+from companion.mavlink.streams import RateMonitor, select_streams, stream_requests
 from companion.params import LIVE_KEYS, ParamServer
 from companion.types import (
     Alert,
@@ -72,6 +74,10 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
+ARDUPILOT_MIN_LOOP_HZ = 50.0
+"""ArduPlane's and ArduRover's default SCHED_LOOP_RATE (Copter's is 400 Hz), Hz."""
+ARDUPILOT_STREAM_FRACTION = 0.8
+"""ArduPilot grants a stream at most this fraction of its loop rate."""
 ROUND_TRIP_S = 1e-5
 """An engine due time mapped to the driver's clock and back may come back this early, s."""
 RATE_CHECK_PERIOD_S = 10.0
@@ -173,6 +179,15 @@ class Pipeline:
         mapped onto the engine's while no sample comes."""
         self._inertial_clock = False
         """:attr:`_data_clock` is from an IMU or attitude sample (not a fix's validity time)."""
+        self.agp = Px4AgpSetup(self.config.encoder.gps_id)
+        """PX4's aux global position set-up: the GLOBAL_POSITION_SENSOR id read from the
+        autopilot (:mod:`companion.mavlink.px4_agp`)."""
+        self.encoder.agp_hold = True  # until the autopilot's id is read (or not answered)
+        self.autopilot_params = AutopilotParams()
+        """ArduPilot's parameters the service adapts to (GPS instance types and lags, loop
+        rate): read over the parameter protocol when it appears and after a reboot."""
+        self._loop_rate_hz: float | None = None
+        self._warned_no_mav_gps = False
 
     # ------------------------------------------------------------------ in
 
@@ -181,10 +196,18 @@ class Pipeline:
         self.stats.messages_in += 1
         if msg._type in PARAM_REQUEST_TYPES:
             return self._on_param_request(msg, t_rx_s)
+        if msg._type == "PARAM_VALUE":
+            return self._on_autopilot_param(msg)
         samples = self.decoder.decode(msg, t_rx_s)
         if not samples:
-            command = self.decoder.take_command()
-            return [] if command is None else self._answer(command, None, t_rx_s)
+            early: list[bytes] = []
+            decoder = self.decoder
+            if self._autopilot is None and decoder.autopilot_heartbeats and decoder.system_id:
+                # the autopilot's HEARTBEAT before any timed message (ArduCopter sends none
+                # on a port until asked): ask for the streams now, or nothing ever comes
+                early = self._on_autopilot_heartbeat(decoder.system_id)
+            command = decoder.take_command()
+            return early if command is None else early + self._answer(command, None, t_rx_s)
         frames: list[bytes] = []
         handle = self.engine.handle
         for sample in samples:
@@ -195,10 +218,12 @@ class Pipeline:
                     frames += self._answer(command, sample, t_rx_s)  # type: ignore[arg-type]
                 continue
             if kind is HeartbeatSample:
-                frames += self._on_autopilot_heartbeat(sample)  # type: ignore[arg-type]
+                frames += self._on_autopilot_heartbeat(sample.system_id)  # type: ignore[union-attr]
             elif kind is RebootEvent:
+                self._restart_agp()
                 self._data_clock = None
                 self._inertial_clock = False
+                self.autopilot_params.reset()  # what was derived stands until read again
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
@@ -212,14 +237,113 @@ class Pipeline:
                 for out in outputs:
                     frames += self._encode(out)
         next_check_s = self._next_rate_check_s
-        if next_check_s is None or samples[-1].t_s >= next_check_s:
-            frames += self._check_rates(samples[-1].t_s)
+        t_last_s = samples[-1].t_s
+        if next_check_s is None or t_last_s >= next_check_s:
+            frames += self._check_rates(t_last_s)
+        if (
+            t_last_s >= self.autopilot_params.next_s
+            and self._autopilot is not None
+            and self.decoder.flavour is AutopilotFlavour.ARDUPILOT
+        ):
+            msgs = self.autopilot_params.requests(
+                t_last_s, self._autopilot, self.config.encoder.dialect
+            )
+            frames += [self._pack(m) for m in msgs]
+        if self.agp.verdict is None and self._autopilot is not None and self._feeds_px4():
+            frames += self._agp_requests(t_last_s)
         return frames
+
+    # ------------------------------------------------------------------ the autopilot's parameters
+
+    def _on_autopilot_param(self, msg: Any) -> list[bytes]:
+        """A PARAM_VALUE: the autopilot's (whoever asked) may change what we derive from it."""
+        decoder = self.decoder
+        try:
+            hdr = msg._header
+            ours = (
+                hdr.srcSystem == decoder.system_id
+                and hdr.srcComponent == decoder.autopilot_component
+            )
+            name = str(msg.param_id)
+            value = float(msg.param_value)
+        except (AttributeError, TypeError, ValueError):
+            count_rejection(decoder.rejections, "corrupt_frame")
+            return []
+        if not ours:
+            count_rejection(decoder.rejections, "unhandled_type")
+            return []
+        decoder.accepted["PARAM_VALUE"] += 1
+        if decoder.flavour is AutopilotFlavour.PX4:
+            return self._on_px4_param(msg) if self._feeds_px4() else []
+        if not self.autopilot_params.on_value(name, value):
+            return []
+        return self._apply_autopilot_params()
+
+    def _apply_autopilot_params(self) -> list[bytes]:
+        """The GPS_INPUT id, our own injection, the receivers' lags and the stream rates
+        from the autopilot's parameters (:mod:`companion.mavlink.autopilot_params`)."""
+        ap = self.autopilot_params
+        encoder = self.encoder
+        instance = ap.mav_gps_instance
+        wanted = instance if self.config.encoder.gps_id_from_autopilot else None
+        if wanted != encoder.gps_id_override:
+            encoder.gps_id_override = wanted
+            if wanted is not None:
+                log.info(
+                    "autopilot GPS %d takes GPS_INPUT (GPS%d_TYPE 14): sending gps_id %d",
+                    wanted + 1,
+                    wanted + 1,
+                    wanted,
+                )
+        feeds = self.config.encoder.output in ("auto", "gps_input")
+        gnss = self.decoder.gnss
+        injected = (
+            instance if feeds and instance is not None and encoder.gps_id == instance else None
+        )
+        if injected != gnss.injected_receiver:
+            gnss.injected_receiver = injected
+            if injected is not None:
+                log.info(
+                    "GPS %d reports our own GPS_INPUT back (%s): not a receiver",
+                    injected + 1,
+                    "GPS_RAW_INT" if injected == 0 else "GPS2_RAW",
+                )
+        for receiver in (0, 1):
+            delay_s = ap.gps_delay_s(receiver)
+            delay_s = self.config.decoder.gnss_delay_s if delay_s is None else delay_s
+            if delay_s != gnss.delay_s[receiver]:
+                gnss.delay_s[receiver] = delay_s
+                log.info(
+                    "GNSS receiver %d: fixes taken %.3f s before their arrival", receiver, delay_s
+                )
+        if feeds and instance is None and ap.types_known and not self._warned_no_mav_gps:
+            self._warned_no_mav_gps = True
+            log.warning(
+                "no GPS instance of the autopilot takes GPS_INPUT (GPS1_TYPE / GPS2_TYPE 14): "
+                "what the service publishes is ignored by the autopilot"
+            )
+        loop_hz = ap.loop_rate_hz
+        if loop_hz is not None and loop_hz != self._loop_rate_hz:
+            old_cap = self._max_stream_hz()
+            self._loop_rate_hz = loop_hz
+            cap = self._max_stream_hz()
+            if any(
+                min(r, cap or math.inf) != min(r, old_cap or math.inf)
+                for r in self.config.streams.rates_hz().values()
+            ):
+                return self._request_streams()
+        return []
 
     def bad_frames(self, count: int) -> None:
         """The byte parser dropped ``count`` corrupt frames: count them as rejections."""
         if count > 0:
             self.decoder.bad_frame(count)
+
+    def unknown_frames(self, count: int) -> None:
+        """The byte parser skipped ``count`` valid frames of message ids the dialect does not
+        know: counted ``unknown_message``, not corrupt."""
+        if count > 0:
+            self.decoder.unknown_frame(count)
 
     # ------------------------------------------------------------------ timer
 
@@ -325,6 +449,8 @@ class Pipeline:
         for block in changed:
             if block == "encoder":
                 self.encoder.reconfigure(config.encoder)
+                self.agp.configured_id = config.encoder.gps_id
+                frames += self._apply_autopilot_params()
             elif block == "link":
                 old_period_s = self._heartbeat_period_s
                 self._heartbeat_period_s = period_s = 1.0 / config.link.heartbeat_rate_hz
@@ -441,23 +567,81 @@ class Pipeline:
         stats.out_by_type[msg._type] += 1
         return self.encoder.pack(msg)
 
-    def _on_autopilot_heartbeat(self, hb: HeartbeatSample) -> list[bytes]:
+    def _on_autopilot_heartbeat(self, system_id: int) -> list[bytes]:
         if self.decoder.system_id is not None and self.encoder.system_id != self.decoder.system_id:
             self.encoder.system_id = self.decoder.system_id
         first = self._autopilot is None
-        self._autopilot = (hb.system_id, 1)
+        self._autopilot = (system_id, 1)
+        if first:
+            self._restart_agp()
         return self._request_streams() if first else []
+
+    def _restart_agp(self) -> None:
+        """A new autopilot, or it rebooted: its aux global position set-up is read again;
+        until then the configured id, and no feedback guard."""
+        self.agp.restart()
+        self.encoder.agp_id = None
+        self.encoder.agp_hold = True
+        self.encoder.feedback_guard = False
+
+    def _feeds_px4(self) -> bool:
+        """The solution goes to PX4 as GLOBAL_POSITION_SENSOR."""
+        output = self.config.encoder.output
+        return output == "global_position_sensor" or (
+            output == "auto" and self.decoder.flavour is AutopilotFlavour.PX4
+        )
+
+    def _agp_requests(self, t_s: float | None) -> list[bytes]:
+        """PARAM_REQUEST_READs of PX4's aux global position parameters, when due."""
+        if self._autopilot is None:
+            return []
+        msgs = self.agp.requests(self.encoder.dialect_module, self._autopilot, t_s)
+        self.encoder.agp_hold = self.agp.waiting
+        return [self._pack(m) for m in msgs]
+
+    def _on_px4_param(self, msg: Any) -> list[bytes]:
+        """A PARAM_VALUE from PX4: one of its aux global position parameters sets the
+        GLOBAL_POSITION_SENSOR id; a problem is announced (``CMP AP_CONFIG``)."""
+        decoder = self.decoder
+        verdict = self.agp.on_param_value(msg)
+        if verdict is None:
+            return []
+        self.encoder.agp_id = verdict.sensor_id
+        self.encoder.agp_hold = False
+        # what PX4 fuses must not be built on what PX4 derived from it
+        self.encoder.feedback_guard = verdict.fused
+        if verdict.problem is None:
+            return []
+        t_s = decoder.last_t_s
+        alert = Alert(
+            0.0 if t_s is None else t_s, AlertCode.AP_CONFIG, Severity.WARNING, verdict.problem
+        )
+        self.encoder.allow_next(alert.code)
+        return self._encode(alert)
 
     def _request_streams(self) -> list[bytes]:
         if self._autopilot is None:
             return []
+        frames = self._agp_requests(None) if self._feeds_px4() else []
         sysid, compid = self._autopilot
-        msgs = stream_requests(sysid, compid, self.decoder.flavour, self.config.streams.rates_hz())
+        flavour = self.decoder.flavour
+        rates = select_streams(flavour, self.config.streams.rates_hz(), self._max_stream_hz())
+        msgs = stream_requests(sysid, compid, flavour, rates)
         self.stats.stream_requests += 1
-        self.rates.reset()
+        self.rates = RateMonitor(rates)
         self._next_rate_check_s = None
         log.info("requested %d streams from autopilot %d", len(msgs), sysid)
-        return [self._pack(m) for m in msgs]
+        return [self._pack(m) for m in msgs] + frames
+
+    def _max_stream_hz(self) -> float | None:
+        """The fastest rate the autopilot grants a stream: ArduPilot denies an interval
+        whose milliseconds times 800 are below its loop period in microseconds
+        (GCS_MAVLINK::set_message_interval), i.e. above 0.8 of ``SCHED_LOOP_RATE``; until
+        that is read, 0.8 of the slowest default loop (Plane, Rover: 50 Hz)."""
+        if self.decoder.flavour is not AutopilotFlavour.ARDUPILOT:
+            return None
+        loop_hz = ARDUPILOT_MIN_LOOP_HZ if self._loop_rate_hz is None else self._loop_rate_hz
+        return 1000.0 / math.ceil(1000.0 / (ARDUPILOT_STREAM_FRACTION * loop_hz) - 1e-9)
 
     def _check_rates(self, t_s: float) -> list[bytes]:
         """Warn (in the log) when a needed stream arrives below its requested rate;

@@ -378,8 +378,10 @@ class Service:
         t_rx_s = time.time()
         bad_before = parser.bad_frames
         bad_bytes_before = parser.bad_bytes
+        unknown_before = parser.unknown_frames
         messages = parser.feed(data)
         self.pipeline.bad_frames(parser.bad_frames - bad_before)
+        self.pipeline.unknown_frames(parser.unknown_frames - unknown_before)
         if watch is not None:
             watch.received(
                 len(data),

@@ -15,8 +15,15 @@ definitions, more cheaply (anything it does not handle still goes to
 Counting convention: ``bad_frames`` counts *bad regions*, a maximal run of
 bytes between two good frames that could not be decoded (one corrupt frame, a
 burst of garbage, a frame cut short followed by a good one). ``bad_bytes``
-counts the bytes in them. A message id that the dialect does not know cannot
-be CRC-checked (its CRC_EXTRA is unknown), so it is treated as bad bytes too.
+counts the bytes in them.
+
+A message id that the dialect does not know (PX4 sends ESC_INFO and ESC_STATUS,
+newer than pymavlink's dialects) cannot be CRC-checked exactly: its CRC_EXTRA
+byte is unknown. Such a frame is *unknown*, not bad, when some CRC_EXTRA byte
+makes its CRC check (1 chance in 256 for random bytes: the CRC's last step is
+a bijection of that byte onto 256 of the 65536 values) and the next frame's
+STX follows it at once (or the data ends there): ``unknown_frames`` counts
+them, they are skipped whole. Anything else with an unknown id is bad bytes.
 
 References
 ----------
@@ -51,6 +58,48 @@ _STX_RE = re.compile(b"[\xfd\xfe]")
 FRAME_OK = 0
 FRAME_NEED_MORE = 1
 FRAME_BAD = 2
+FRAME_UNKNOWN = 3
+
+
+def _x25_tails() -> frozenset[int]:
+    """What the X.25 CRC's step on a last byte can XOR into ``crc >> 8`` (256 values)."""
+    tails = set()
+    for b in range(256):
+        tmp = (b ^ (b << 4)) & 0xFF
+        tails.add(((tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF)
+    return frozenset(tails)
+
+
+_X25_TAILS = _x25_tails()
+_CRC_INIT = 0xFFFF
+
+
+def _crc_x25(data: bytes | bytearray) -> int:
+    """MAVLink's CRC (X.25, MCRF4XX) of ``data``, from 0xFFFF."""
+    crc = _CRC_INIT
+    for b in data:
+        tmp = (b ^ crc) & 0xFF
+        tmp = (tmp ^ (tmp << 4)) & 0xFF
+        crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+    return crc
+
+
+def unknown_frame_checks(buf: bytes | bytearray, pos: int, length: int, gap: int = 0) -> bool:
+    """Is the complete frame at ``buf[pos:pos + length]``, of a message id the dialect does
+    not know, a valid frame? True when its CRC checks for some CRC_EXTRA byte and the byte
+    ``gap`` after its end is an STX (or the data ends there).
+
+    ``gap`` is what separates frames in the stream: 0 on a link, the 8-byte timestamp in
+    a .tlog.
+    """
+    signed = buf[pos] == STX_V2 and buf[pos + 2] & IFLAG_SIGNED
+    crc_end = pos + length - (SIGNATURE_LEN if signed else 0)
+    crc = buf[crc_end - 2] | (buf[crc_end - 1] << 8)
+    partial = _crc_x25(buf[pos + 1 : crc_end - 2])
+    if (crc ^ (partial >> 8)) not in _X25_TAILS:
+        return False
+    nxt = pos + length + gap
+    return nxt >= len(buf) or buf[nxt] == STX_V2 or buf[nxt] == STX_V1
 
 
 def frame_length(buf: bytes | bytearray, pos: int) -> int:
@@ -79,6 +128,7 @@ def try_frame(
     pos: int,
     fast: FastDecoder | None = None,
     light: bool = False,
+    gap: int = 0,
 ) -> tuple[int, Any, int]:
     """Try to decode one frame whose STX byte is at ``buf[pos]``.
 
@@ -99,13 +149,17 @@ def try_frame(
     light
         With ``fast``: light messages for the fast decoder's ``light_ids``
         (:meth:`~companion.mavlink.messages.FastDecoder.light_decode_at`).
+    gap
+        Bytes between one frame and the next in this stream (0 on a link, 8 in a .tlog):
+        where :func:`unknown_frame_checks` looks for the next STX.
 
     Returns
     -------
     (status, message, length)
         ``FRAME_OK`` with the message and the frame length; ``FRAME_NEED_MORE``
-        when ``buf`` ends before the frame does; ``FRAME_BAD`` when the bytes are
-        not a frame this dialect can verify.
+        when ``buf`` ends before the frame does; ``FRAME_UNKNOWN`` (no message) for a
+        valid frame of a message id the dialect does not know
+        (:func:`unknown_frame_checks`); ``FRAME_BAD`` when the bytes are not a frame.
     """
     if fast is not None:
         found = fast.light_decode_at(buf, pos) if light else fast.decode_at(buf, pos)
@@ -121,6 +175,8 @@ def try_frame(
     else:
         msg_id = buf[pos + 5]
     if msg_id not in mavlink_map:
+        if unknown_frame_checks(buf, pos, length, gap):
+            return FRAME_UNKNOWN, None, length
         return FRAME_BAD, None, length
     try:
         msg = mav.decode(buf[pos : pos + length])
@@ -156,6 +212,8 @@ class FrameParser:
         Messages returned.
     refused_frames : int
         Frames ``frame_check`` refused.
+    unknown_frames : int
+        Valid frames of message ids the dialect does not know, skipped (not bad).
     """
 
     __slots__ = (
@@ -167,6 +225,7 @@ class FrameParser:
         "_in_bad",
         "_check",
         "refused_frames",
+        "unknown_frames",
         "bad_frames",
         "bad_bytes",
         "good_frames",
@@ -190,6 +249,7 @@ class FrameParser:
         self.good_frames = 0
         self._check = frame_check
         self.refused_frames = 0
+        self.unknown_frames = 0
 
     def _mark_bad(self, nbytes: int) -> None:
         if not self._in_bad:
@@ -241,6 +301,10 @@ class FrameParser:
                     out.append(msg)
                 else:
                     self.refused_frames += 1
+                self._in_bad = False
+                pos += length
+            elif status == FRAME_UNKNOWN:
+                self.unknown_frames += 1
                 self._in_bad = False
                 pos += length
             elif status == FRAME_BAD or end_of_stream:

@@ -2,12 +2,17 @@
 
 :func:`stream_requests` builds one ``COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL``
 per message (param1 = message id, param2 = interval in microseconds, -1 to
-stop the message when its rate is 0) and, for ArduPilot and unknown autopilots,
-``REQUEST_DATA_STREAM`` fallbacks for firmware older than
-SET_MESSAGE_INTERVAL support. PX4 ignores REQUEST_DATA_STREAM, so none is sent
-to it. The data-stream groups follow ArduPilot's (messages outside them are
-requested only by interval); a group's rate is the highest requested rate of
-its members, rounded up to whole Hz.
+stop the message when its rate is 0) and, for unknown autopilots only,
+``REQUEST_DATA_STREAM`` fallbacks for firmware older than SET_MESSAGE_INTERVAL
+support: a group request raises every message of the group, also those nobody asked
+for, so ArduPilot (which has taken SET_MESSAGE_INTERVAL for years) and PX4 (which
+ignores groups) get none. The data-stream groups follow ArduPilot's; a group's rate is
+the highest requested rate of its members, rounded up to whole Hz.
+
+:func:`select_streams` turns the configured rates into what an autopilot can honour:
+one IMU stream (ArduPilot RAW_IMU, PX4 HIGHRES_IMU, at the highest IMU rate asked
+for; the decoder uses one anyway) and no rate above the autopilot's loop rate
+(ArduPlane's 50 Hz loop delivers ~40 Hz of a 50 Hz request and refuses faster).
 
 :class:`RateMonitor` measures the received rate of each requested message over
 a sliding window and reports those below ``min_fraction`` (70 %) of the
@@ -48,6 +53,40 @@ DATA_STREAM_OF: dict[str, int] = {
     "EXTENDED_SYS_STATE": MAV_DATA_STREAM_EXTRA3,
 }
 """ArduPilot's REQUEST_DATA_STREAM group of each message we use."""
+
+
+IMU_STREAMS = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3")
+"""The IMU messages; one of them is requested."""
+IMU_STREAM_OF: dict[AutopilotFlavour, str] = {
+    AutopilotFlavour.ARDUPILOT: "RAW_IMU",
+    AutopilotFlavour.PX4: "HIGHRES_IMU",
+}
+"""The IMU message each autopilot sends best (ArduPilot: its primary IMU, unscaled)."""
+
+
+def select_streams(
+    flavour: AutopilotFlavour, rates_hz: Mapping[str, float], max_rate_hz: float | None = None
+) -> dict[str, float]:
+    """The rates to request of ``flavour`` from the configured ``rates_hz``: one IMU
+    stream (:data:`IMU_STREAM_OF`, all of them for an unknown autopilot) at the highest
+    configured IMU rate, every rate capped at ``max_rate_hz`` (the autopilot's loop
+    rate, when known). Messages configured at 0 are left out (left alone)."""
+    out: dict[str, float] = {}
+    imu = IMU_STREAM_OF.get(flavour)
+    imu_rate = max((rates_hz.get(n, 0.0) for n in IMU_STREAMS), default=0.0)
+    for name, rate in rates_hz.items():
+        if rate <= 0.0:
+            continue
+        if imu is not None and name in IMU_STREAMS:
+            if name != imu:
+                continue
+            rate = imu_rate
+        if max_rate_hz is not None and max_rate_hz > 0.0:
+            rate = min(rate, max_rate_hz)
+        out[name] = rate
+    if imu is not None and imu_rate > 0.0 and imu not in out:
+        out[imu] = imu_rate if max_rate_hz is None else min(imu_rate, max_rate_hz)
+    return out
 
 
 def _message_ids(dialect: str) -> dict[str, int]:
@@ -114,7 +153,7 @@ def stream_requests(
         group = DATA_STREAM_OF.get(name)
         if group is not None:
             groups[group] = max(groups.get(group, 0.0), rate)
-    if flavour != AutopilotFlavour.PX4:
+    if flavour == AutopilotFlavour.UNKNOWN:
         for group in sorted(groups):
             rate = groups[group]
             out.append(

@@ -16,6 +16,9 @@ open (:class:`TlogError`). What it skips, it counts in :attr:`TlogReader.stats`:
     the bytes in those runs.
 ``truncated_record``
     an incomplete record at the end of the file.
+``unknown_frame``
+    a valid record of a message id the dialect does not know (see
+    :func:`companion.mavlink.framing.unknown_frame_checks`), skipped whole.
 ``time_backwards``
     a good frame whose timestamp is earlier than the previous accepted one.
 ``time_jump``
@@ -45,7 +48,13 @@ from types import TracebackType
 from typing import Any, BinaryIO
 
 from companion.mavlink.dialect import load_dialect
-from companion.mavlink.framing import FRAME_BAD, FRAME_NEED_MORE, FrameParser, try_frame
+from companion.mavlink.framing import (
+    FRAME_BAD,
+    FRAME_NEED_MORE,
+    FRAME_UNKNOWN,
+    FrameParser,
+    try_frame,
+)
 from companion.mavlink.ids import CRC_LEN, HEADER_LEN_V2, STX_V1, STX_V2
 from companion.mavlink.messages import FastDecoder
 from companion.mavlink.units import US_PER_S
@@ -244,7 +253,7 @@ class TlogReader:
                     else:
                         if buf[p] == STX_V2 or buf[p] == STX_V1:
                             # pymavlink decides what the fast path declined
-                            status, msg, length = try_frame(mav, mmap_, buf, p)
+                            status, msg, length = try_frame(mav, mmap_, buf, p, gap=TIMESTAMP_LEN)
                         else:
                             status = FRAME_BAD
                         if status == FRAME_NEED_MORE:
@@ -257,6 +266,14 @@ class TlogReader:
                                 tail_cut = True
                             stats["bad_bytes"] += 1
                             pos += 1
+                            continue
+                        if status == FRAME_UNKNOWN:
+                            stats["unknown_frame"] += 1
+                            if tail_cut:
+                                stats["bad_region"] += 1
+                                tail_cut = False
+                            in_bad = False
+                            pos = p + length
                             continue
                         if status == FRAME_BAD:
                             if not in_bad:

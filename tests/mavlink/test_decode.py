@@ -166,11 +166,47 @@ def test_raw_and_scaled_imu_mg_mrad() -> None:
         (apm.MAVLink_scaled_imu2_message, "SCALED_IMU2", 1),
         (apm.MAVLink_scaled_imu3_message, "SCALED_IMU3", 2),
     ):
+        d = ready()  # one IMU stream per decoder: the others are not used
         s = one(d, cls(10_040, 500, 0, -980, -100, 200, 0, 0, 0, 0, 0))
         assert isinstance(s, ImuSample)
         assert s.t_s == 10.04 and s.imu_id == iid and s.source == name
         np.testing.assert_allclose(s.acc_b_mps2, [0.5 * G, 0.0, -0.98 * G], rtol=1e-15)
         np.testing.assert_allclose(s.gyro_b_radps, [-0.1, 0.2, 0.0], rtol=1e-15)
+
+
+def test_one_imu_stream_used() -> None:
+    """ArduPilot sends RAW_IMU (IMU 0) and SCALED_IMU2 (IMU 1): one is used, the other
+    counted as unused; when the chosen one stops, the other takes over."""
+    d = ready()
+    used: list[str] = []
+    for k in range(20):  # both at 50 Hz, interleaved
+        t_ms = 10_000 + 20 * k
+        for msg in (
+            raw_imu(t_ms * 1000, zacc=-1000),
+            apm.MAVLink_scaled_imu2_message(t_ms, 0, 0, -1000, 0, 0, 0, 0, 0, 0, 0),
+        ):
+            used += [s.source for s in d.decode(AP.parsed(msg), 1.0) if isinstance(s, ImuSample)]
+    assert used == ["RAW_IMU"] * 20
+    assert d.rejections["unused_imu_stream"] == 20
+    for k in range(20, 60):  # RAW_IMU stops: SCALED_IMU2 takes over after 0.5 s
+        t_ms = 10_000 + 20 * k
+        msg = apm.MAVLink_scaled_imu2_message(t_ms, 0, 0, -1000, 0, 0, 0, 0, 0, 0, 0)
+        used += [s.source for s in d.decode(AP.parsed(msg), 1.0) if isinstance(s, ImuSample)]
+    assert 10 <= used.count("SCALED_IMU2") <= 40
+
+
+def test_repeated_fix_is_no_new_fix() -> None:
+    """ArduPlane's 10 Hz GPS_RAW_INT repeats each 5 Hz fix: the repeat is no new fix."""
+    d = ready()
+    fixes = 0
+    for k in range(10):
+        t_us = 10_000_000 + 200_000 * (k // 2)  # each fix sent twice
+        msg = apm.MAVLink_gps_raw_int_message(
+            t_us, 3, 520_000_000 + k // 2, 209_000_000, 110_000, 100, 100, 2300, 0, 12
+        )
+        fixes += sum(isinstance(s, GnssFix) for s in d.decode(AP.parsed(msg), 1.0))
+    assert fixes == 5
+    assert d.rejections["repeated_fix"] == 5
 
 
 def test_highres_imu_si() -> None:

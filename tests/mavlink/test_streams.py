@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from companion.mavlink.framing import FrameParser
-from companion.mavlink.streams import RateMonitor, stream_requests
+from companion.mavlink.streams import RateMonitor, select_streams, stream_requests
 from companion.types import AutopilotFlavour
 from tests.mavlink._util import Packer
 
@@ -23,12 +23,29 @@ def test_set_message_interval_for_each_message() -> None:
     assert len(FrameParser().feed(b"".join(pk(m) for m in msgs))) == 4
 
 
-def test_request_data_stream_fallback_for_ardupilot() -> None:
+def test_no_group_requests_for_ardupilot() -> None:
+    """A group request raises every message of the group: ArduPilot gets per-message
+    requests only."""
     msgs = stream_requests(1, 1, AutopilotFlavour.ARDUPILOT, RATES)
+    assert [m.get_type() for m in msgs] == ["COMMAND_LONG"] * 4
+
+
+def test_request_data_stream_fallback_for_an_unknown_autopilot() -> None:
+    msgs = stream_requests(1, 1, AutopilotFlavour.UNKNOWN, RATES)
     rds = [m for m in msgs if m.get_type() == "REQUEST_DATA_STREAM"]
     by_id = {m.req_stream_id: (m.req_message_rate, m.start_stop) for m in rds}
     # RAW_SENSORS carries RAW_IMU (50) and SCALED_IMU2 (0): the group runs at 50 Hz
     assert by_id == {1: (50, 1), 2: (5, 1), 10: (25, 1)}
+
+
+def test_one_imu_stream_selected_within_the_cap() -> None:
+    rates = {"RAW_IMU": 50.0, "SCALED_IMU2": 50.0, "HIGHRES_IMU": 60.0, "ATTITUDE": 25.0}
+    assert select_streams(AutopilotFlavour.ARDUPILOT, rates, 40.0) == {
+        "RAW_IMU": 40.0,
+        "ATTITUDE": 25.0,
+    }
+    assert select_streams(AutopilotFlavour.PX4, rates) == {"HIGHRES_IMU": 60.0, "ATTITUDE": 25.0}
+    assert select_streams(AutopilotFlavour.UNKNOWN, rates) == rates
 
 
 def test_bad_requests_raise() -> None:

@@ -120,8 +120,8 @@ class Decoder:
         c = self.config
         self._clock = clock = BootClock(c)
         self._vehicle = vehicle = VehicleDecoder(c, clock)
-        gnss = GnssDecoder(c, clock)
-        inertial = InertialDecoder(c, clock)
+        self.gnss = gnss = GnssDecoder(c, clock)
+        self.inertial = inertial = InertialDecoder(c, clock)
         self._own_comp = c.own_component
         self._pending_command: DecodedCommand | None = None
         self._handlers: dict[int, Callable[[Any, float], Sample | None]] = {
@@ -243,6 +243,12 @@ class Decoder:
         """Count ``count`` corrupt frames reported by the parser (reason ``corrupt_frame``)."""
         if count > 0:
             self._reject("corrupt_frame", count)
+
+    def unknown_frame(self, count: int = 1) -> None:
+        """Count ``count`` valid frames of message ids the dialect does not know (reason
+        ``unknown_message``: benign, not corrupt)."""
+        if count > 0:
+            self._reject("unknown_message", count)
 
     # ------------------------------------------------------------------ internals
 

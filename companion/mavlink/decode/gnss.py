@@ -4,7 +4,14 @@
   ``fix_type`` < 2 still decodes: the engine must see "no fix". ``vel`` unknown
   (65535) gives ``ground_speed_mps = 0.0`` with ``vel_ne_mps = None``; ``cog``
   unknown gives ``course_rad = vel_ne_mps = None``. The fix time is the
-  message's ``time_usec`` on the boot clock minus ``DecoderConfig.gnss_delay_s``.
+  message's ``time_usec`` on the boot clock minus the receiver's lag
+  (``DecoderConfig.gnss_delay_s``, or the autopilot's GPSn_DELAY_MS when set).
+* The autopilot's GPS instance that the service itself feeds reports our own output
+  back (ArduPilot's GPS2_RAW with GPS2_TYPE = 14): rejected as ``own_injection``.
+* A message repeating the previous one of its stream (same non-zero ``time_usec``,
+  position and a 2-D or better fix type: ArduPlane sends its 5 Hz fixes in a 10 Hz
+  GPS_RAW_INT) is no new fix: rejected as ``repeated_fix``, so a repeat never looks
+  like a frozen receiver.
 * GPS_RTK / GPS2_RTK: ``t_s`` is the latest autopilot time, not
   ``time_last_baseline_ms`` (which stays old while the corrections are missing
   and would look like a clock jump).
@@ -58,7 +65,14 @@ class GnssDecoder:
         self._max_acc_mm = config.max_accuracy_m * units.MM_PER_M
         self._alt_lo_mm = config.alt_min_m * units.MM_PER_M
         self._alt_hi_mm = config.alt_max_m * units.MM_PER_M
-        self._gnss_delay_s = config.gnss_delay_s
+        self.delay_s = [config.gnss_delay_s, config.gnss_delay_s]
+        """Per receiver (0, 1), the lag subtracted from its fix times, s: ``gnss_delay_s``
+        unless the autopilot's own lag parameter says otherwise (set by the pipeline)."""
+        self.injected_receiver: int | None = None
+        """The receiver that reports back what the service injects (the autopilot's GPS
+        instance fed by our GPS_INPUT): never a receiver of ours (``own_injection``)."""
+        self._last_fix: dict[str, tuple[int, int, int, int]] = {}
+        """Stream -> (time_usec, lat, lon, fix_type) of its last message."""
 
     def _acc_mm(self, v: int) -> float | None:
         if v == 0:
@@ -68,6 +82,12 @@ class GnssDecoder:
         return v / units.MM_PER_M
 
     def _gnss(self, msg: Any, t_rx_s: float, receiver: int, stream: str) -> GnssFix:
+        if receiver == self.injected_receiver:
+            raise Rejected("own_injection")
+        key = (msg.time_usec, msg.lat, msg.lon, msg.fix_type)
+        if key[0] != 0 and key[3] >= 2 and self._last_fix.get(stream) == key:
+            raise Rejected("repeated_fix")
+        self._last_fix[stream] = key
         check_latlon_alt(msg.lat, msg.lon, msg.alt, self._alt_lo_mm, self._alt_hi_mm)
         fix = _FIX_TYPES.get(msg.fix_type)
         if fix is None:
@@ -103,7 +123,7 @@ class GnssDecoder:
         eph = msg.eph
         epv = msg.epv
         sats = msg.satellites_visible
-        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - self._gnss_delay_s
+        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - self.delay_s[receiver]
         # positional, in GnssFix's field order (18 keywords cost more on this path)
         return GnssFix(
             t_s,

@@ -6,6 +6,10 @@
 * ATTITUDE, ATTITUDE_QUATERNION -> :class:`AttitudeSample` (yaw wrapped to
   [-pi, pi]).
 
+One IMU stream is used (:class:`ImuStreamChoice`): the autopilot may send several
+(ArduPilot RAW_IMU and SCALED_IMU2/3, each its own sensor); mixing them would feed the
+navigator two sensors' biases in turn. The others are rejected as ``unused_imu_stream``.
+
 Checks: non-finite values (``nan_field``), IMU beyond ``max_acc_mps2`` /
 ``max_gyro_radps`` (``imu_out_of_range``), attitude angles out of range or
 rates too large (``attitude_out_of_range``), quaternion norm far from 1
@@ -14,6 +18,7 @@ rates too large (``attitude_out_of_range``), quaternion norm far from 1
 
 from __future__ import annotations
 
+import collections
 import math
 from typing import Any
 
@@ -37,6 +42,50 @@ _YAW_MAX = 2.0 * _ROLL_MAX
 """Largest plausible ATTITUDE angles, rad (a wrapped yaw may span two turns)."""
 
 
+class ImuStreamChoice:
+    """Which IMU stream (message name, sensor id) is used: the busiest over the last
+    ``window_s`` of autopilot time; another takes over only when the chosen one stops
+    (``stop_s``) or another delivers clearly more (``switch_ratio``)."""
+
+    def __init__(self, window_s: float = 2.0, stop_s: float = 0.5, switch_ratio: float = 1.5):
+        self.window_s = window_s
+        self.stop_s = stop_s
+        self.switch_ratio = switch_ratio
+        self.chosen: tuple[str, int] | None = None
+        self._times: dict[tuple[str, int], collections.deque[float]] = {}
+
+    def accept(self, key: tuple[str, int], t_s: float) -> bool:
+        q = self._times.get(key)
+        if q is None:
+            q = self._times[key] = collections.deque()
+        elif q and q[-1] > t_s:  # the clock went back (a reboot): start this stream afresh
+            q.clear()
+        q.append(t_s)
+        lo = t_s - self.window_s
+        while q[0] < lo:
+            q.popleft()
+        chosen = self.chosen
+        if chosen == key:
+            return True
+        if chosen is None:
+            self.chosen = key
+            return True
+        cq = self._times[chosen]
+        if (
+            not cq
+            or cq[-1] < t_s - self.stop_s
+            or cq[-1] > t_s + self.window_s  # the clock went back: a reboot
+            or len(q) > self.switch_ratio * sum(1 for t in cq if t >= lo) + 2
+        ):
+            self.chosen = key
+            return True
+        return False
+
+    def reset(self) -> None:
+        self.chosen = None
+        self._times.clear()
+
+
 class InertialDecoder:
     """The IMU and attitude handlers (``(msg, t_rx_s) -> sample``, raising :class:`Rejected`)."""
 
@@ -46,6 +95,7 @@ class InertialDecoder:
         self._time_us = clock.time_us
         self._max_acc2 = config.max_acc_mps2**2
         self._max_gyro2 = config.max_gyro_radps**2
+        self.imu_choice = ImuStreamChoice()
 
     def _imu(
         self,
@@ -67,6 +117,8 @@ class InertialDecoder:
             raise Rejected("nan_field")
         if a2 > self._max_acc2 or g2 > self._max_gyro2:
             raise Rejected("imu_out_of_range")
+        if not self.imu_choice.accept((src, imu_id), t_s):
+            raise Rejected("unused_imu_stream")
         # positional, cheaper than keywords at 50 Hz (t_s, t_rx_s, acc, gyro, id, source)
         return ImuSample(t_s, t_rx_s, np.array((ax, ay, az)), np.array((gx, gy, gz)), imu_id, src)
 

@@ -12,7 +12,17 @@ import logging
 
 logger = logging.getLogger(__name__)
 
-BENIGN_REASONS = frozenset({"unhandled_type", "own_message", "not_autopilot", "wrong_sysid"})
+BENIGN_REASONS = frozenset(
+    {
+        "unhandled_type",
+        "own_message",
+        "not_autopilot",
+        "wrong_sysid",
+        "repeated_fix",
+        "unused_imu_stream",
+        "own_injection",
+    }
+)
 """Reasons that are the normal traffic of a shared link, not a fault."""
 
 

@@ -15,6 +15,7 @@ LIVE_KEYS = frozenset(
     {
         "output",
         "gps_id",
+        "gps_id_from_autopilot",
         "min_h_acc_m",
         "min_v_acc_m",
         "min_vel_acc_mps",
@@ -37,6 +38,11 @@ class EncoderConfig:
     ``"global_position_sensor"``."""
     gps_id: int = ranged(0, ge=0, le=255)
     """GPS_INPUT ``gps_id`` / GLOBAL_POSITION_SENSOR ``id``."""
+    gps_id_from_autopilot: bool = True
+    """ArduPilot: send GPS_INPUT with the ``gps_id`` of the autopilot's GPS instance that
+    takes it (``GPS1_TYPE``/``GPS2_TYPE`` = 14, MAV, read over the parameter protocol)
+    instead of ``gps_id``; ``gps_id`` until the parameters are read, and when no instance
+    is of that type (the autopilot then ignores GPS_INPUT: a warning says so)."""
     min_h_acc_m: float = ranged(0.01, gt=0.0)
     """Floors of the published 1-sigma horizontal / vertical accuracy, m."""
     min_v_acc_m: float = ranged(0.01, gt=0.0)

@@ -41,6 +41,7 @@ from companion.types import (
     FixType,
     IntegrityReport,
     NamedValue,
+    NavMode,
     NavSolution,
     Output,
     largest_eigenvalue_2x2,
@@ -58,6 +59,9 @@ _FIX_3D = int(FixType.FIX_3D)
 _RTK_FIXED = int(FixType.RTK_FIXED)
 _ARDUPILOT = AutopilotFlavour.ARDUPILOT
 _PX4 = AutopilotFlavour.PX4
+FEEDBACK_HOLD_MODES = frozenset({NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING})
+"""With :attr:`Encoder.feedback_guard`: modes in which PX4 gets no GLOBAL_POSITION_SENSOR
+(from GNSS lost until GNSS is trusted again)."""
 _DEGE7_PER_RAD = units.DEGE7_PER_RAD
 _MM_PER_M = units.MM_PER_M
 _CM_PER_M = units.CM_PER_M
@@ -124,6 +128,9 @@ class Encoder:
 
     def __init__(self, config: EncoderConfig | None = None, system_id: int = 1) -> None:
         self.config = config if config is not None else EncoderConfig()
+        self.gps_id_override: int | None = None
+        """The id the autopilot's parameters call for (``gps_id_from_autopilot``), set by
+        the pipeline; None: ``config.gps_id``."""
         self._mod = load_dialect(self.config.dialect)
         self._packer = Packer(self._mod, MAV_COMP_ID_ONBOARD_COMPUTER)
         self._pack_args = self._packer.pack_args
@@ -141,8 +148,22 @@ class Encoder:
         }
         self.suppressed: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
+        self.held: collections.Counter[str] = collections.Counter()
+        """GLOBAL_POSITION_SENSORs held back from PX4, by reason (``agp_id_unknown``,
+        ``feedback_guard``)."""
         self._gpi_cls = self._mod.MAVLink_global_position_int_message
         self._gps_input_cls = self._mod.MAVLink_gps_input_message
+        self.agp_id: int | None = None
+        """GLOBAL_POSITION_SENSOR ``id`` read from PX4 (``EKF2_AGP0_ID``,
+        :mod:`companion.mavlink.px4_agp`); None: ``config.gps_id``."""
+        self.agp_hold = False
+        """PX4's id is not known yet (being read, or no autopilot yet): no
+        GLOBAL_POSITION_SENSOR (one of another id would keep PX4 from fusing the right
+        one). The pipeline holds from its start until it has read the id, or given up."""
+        self.feedback_guard = False
+        """PX4 fuses what we send (``EKF2_AGP0_CTRL``): no GLOBAL_POSITION_SENSOR from a GNSS
+        gap's start until GNSS is trusted again (:data:`FEEDBACK_HOLD_MODES`): bridged, our
+        solution rests on PX4's attitude and IMU, which PX4 would then correct with it."""
 
     @property
     def system_id(self) -> int:
@@ -154,6 +175,12 @@ class Encoder:
         if not 1 <= int(value) <= 255:
             raise ValueError(f"system_id must be in 1..255, got {value}")
         self._packer.mav.srcSystem = int(value)
+
+    @property
+    def gps_id(self) -> int:
+        """The id sent in GPS_INPUT, GLOBAL_POSITION_SENSOR and GNSS_INTEGRITY."""
+        override = self.gps_id_override
+        return self.config.gps_id if override is None else override
 
     def reconfigure(self, config: EncoderConfig) -> None:
         """Encode with ``config`` from the next message on; only the keys of
@@ -167,6 +194,11 @@ class Encoder:
         if fixed:
             raise ValueError(f"[encoder] {', '.join(sorted(fixed))}: only at a restart")
         self.config = config
+
+    @property
+    def dialect_module(self) -> Any:
+        """The pymavlink dialect module the messages are built from."""
+        return self._mod
 
     @property
     def has_gnss_integrity(self) -> bool:
@@ -331,7 +363,7 @@ class Encoder:
                     self._gps_input_cls,
                     (
                         round(sol.t_s * _US_PER_S),
-                        cfg.gps_id,
+                        self.gps_id,
                         0,  # ignore_flags: every field is provided
                         0,  # time_week_ms: no GPS time
                         0,  # time_week: 0 disables ArduPilot's jitter correction
@@ -353,6 +385,9 @@ class Encoder:
                     ),
                 )
             )
+        elif self.agp_hold or (self.feedback_guard and sol.mode in FEEDBACK_HOLD_MODES):
+            self.held["agp_id_unknown" if self.agp_hold else "feedback_guard"] += 1
+            return out
         else:
             healthy = sol.fix_type >= _FIX_3D
             alt_hae = sol.alt_hae_m
@@ -362,7 +397,7 @@ class Encoder:
                     (
                         self.system_id,
                         MAV_COMP_ID_AUTOPILOT1,
-                        cfg.gps_id,
+                        self.gps_id if self.agp_id is None else self.agp_id,
                         round(sol.t_s * units.US_PER_S),
                         0,
                         GLOBAL_POSITION_SRC_ESTIMATOR,
@@ -449,7 +484,7 @@ class Encoder:
         ok = rep.integrity_ok and not rep.fault_detected
         return [
             self._mod.MAVLink_gnss_integrity_message(
-                self.config.gps_id,
+                self.gps_id,
                 0,
                 0,
                 0,

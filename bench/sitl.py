@@ -1,0 +1,158 @@
+"""The service beside ArduPilot SITL: its error against the autopilot's own, and its
+alert latencies, on the scenarios of ``tests/sitl`` (ArduPlane and ArduCopter mission
+circuits with a GPS outage, a reboot and a restart) flown longer.
+
+Runs ``tests.sitl.ardupilot_runner`` inside ``private-net`` (the simulators are found
+in ``../shared/sitl`` or ``$COMPANION_SITL_DIR``; nothing runs without them) and prints
+one table: per scenario, the horizontal error (mean / 95th percentile / max, m) of the
+service and of the autopilot's EKF3 against the simulator's truth over the healthy
+cruise and over the GPS outage, GNSS_LOST and GNSS_BACK latencies, and the alerts that
+should not be there. All times are the autopilot's; ``--speedup`` changes only the wall
+time.
+
+    python bench/sitl.py                      # 5 min cruise, 30 s outage
+    python bench/sitl.py --cruise-s 600 --speedup 3 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tests.sitl.harness import run_scenario  # noqa: E402
+from tests.sitl.locate import missing  # noqa: E402
+
+RUNNER = "tests.sitl.ardupilot_runner"
+UNWANTED = ("GNSS_STALE", "GNSS_LOST", "FAULT", "BRIDGING")
+
+
+def _fmt(stats: dict[str, Any]) -> str:
+    if not stats.get("n"):
+        return "-"
+    return f"{stats['mean_m']:.2f} / {stats['p95_m']:.2f} / {stats['max_m']:.2f}"
+
+
+def _latency(value: float | None) -> str:
+    return "missed" if value is None else f"{value:.2f} s"
+
+
+def _print_flight(name: str, flight: dict[str, Any]) -> None:
+    healthy, outage = flight["healthy"], flight["outage"]
+    print(f"\n{name}")
+    print(f"  {'phase':30s} {'service':>22s} {'autopilot EKF3':>22s}")
+    span = healthy["t1_s"] - healthy["t0_s"]
+    rows = [
+        (f"healthy cruise ({span:.0f} s)", healthy),
+        (f"GPS outage ({outage['t_on_s'] - outage['t_off_s']:.0f} s)", outage),
+        ("after GPS returns (+5 s on)", flight["after"]),
+    ]
+    for label, sec in rows:
+        print(f"  {label:30s} {_fmt(sec['service']):>22s} {_fmt(sec['autopilot']):>22s}")
+    print(
+        f"  the autopilot published no position for {outage['autopilot_max_gap_s']:.1f} s "
+        "of the outage (longest gap)"
+    )
+    print(
+        f"  GNSS_LOST {_latency(outage['gnss_lost_latency_s'])} after the GPS went off, "
+        f"GNSS_BACK {_latency(outage['gnss_back_latency_s'])} after it returned"
+    )
+    unwanted = [(t, a) for t, a in healthy["alerts"] if a.split()[1] in UNWANTED]
+    print(f"  unwanted alerts in the healthy cruise: {len(unwanted)}")
+    for t, a in unwanted[:10]:
+        print(f"    {t:8.2f} s  {a}")
+    print("  alerts from the GPS cut on:")
+    for t, a in outage["alerts"]:
+        print(f"    {t:8.2f} s  {a}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--speedup", type=float, default=4.0)
+    p.add_argument("--cruise-s", type=float, default=300.0)
+    p.add_argument("--outage-s", type=float, default=30.0)
+    p.add_argument("--after-s", type=float, default=60.0)
+    p.add_argument(
+        "--params",
+        default='{"GPS1_DELAY_MS": 100}',
+        help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms",
+    )
+    p.add_argument("--json", type=Path, help="also write the runner's results here")
+    p.add_argument(
+        "--px4-runs",
+        type=int,
+        default=1,
+        help="PX4 SIH GNSS-cut flights with and without the service (bench/sitl_px4.py); 0: none",
+    )
+    args = p.parse_args(argv)
+    reason = missing("arduplane")
+    if reason:
+        print(f"bench/sitl.py: {reason}", file=sys.stderr)
+        return 2
+    results: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory(prefix="companion-bench-sitl-") as tmp:
+        runs = {
+            "plane circuit": [
+                "flight",
+                "--speedup",
+                f"{args.speedup:g}",
+                "--cruise-s",
+                f"{args.cruise_s:g}",
+                "--outage-s",
+                f"{args.outage_s:g}",
+                "--after-s",
+                f"{args.after_s:g}",
+                "--params",
+                args.params,
+            ],
+            "copter circuit": [
+                "flight",
+                "--vehicle",
+                "copter",
+                "--speedup",
+                f"{args.speedup:g}",
+                "--cruise-s",
+                f"{min(args.cruise_s, 120.0):g}",
+                "--outage-s",
+                f"{args.outage_s:g}",
+                "--after-s",
+                "20",
+                "--params",
+                args.params,
+            ],
+            "plane reboot": ["reboot", "--speedup", "1"],
+        }
+        for name, run_args in runs.items():
+            out = Path(tmp) / f"{name.replace(' ', '_')}.json"
+            timeout_s = 120.0 + 3.0 * (args.cruise_s + args.outage_s + args.after_s + 120.0)
+            results[name] = run_scenario(RUNNER, run_args, out, timeout_s=timeout_s)
+    print(f"autopilot parameters {args.params}, speed-up {args.speedup:g}")
+    print("horizontal error vs SITL truth, m: mean / p95 / max")
+    for name in ("plane circuit", "copter circuit"):
+        _print_flight(name, results[name])
+    for event in results["plane reboot"]["events"]:
+        delay = event["resume_delay_s"]
+        print(
+            f"{event['kind']:8s}: publishing resumed "
+            f"{'never' if delay is None else f'{delay:.1f} s'} after the autopilot was back"
+        )
+    if args.px4_runs > 0 and missing("px4/run-sih.sh", "px4/bin/px4") is None:
+        from bench.sitl_px4 import print_px4, run_px4
+
+        print()
+        px4 = run_px4(args.px4_runs, 20.0, 10.0)
+        print_px4(px4, 20.0)
+        results["px4 gnss cut"] = px4  # type: ignore[assignment]
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,336 @@
+"""ArduPilot SITL scenarios with the service beside it. Run only inside ``private-net``
+(``tests.sitl.harness.run_scenario`` does that); writes its result as JSON.
+
+Scenarios:
+
+* ``flight``: ArduPlane takes off on a mission circuit (a rectangle, 900 x 600 m, flown
+  in a loop; ``--vehicle copter``: ArduCopter, a guided take-off to 25 m, then a
+  200 x 120 m rectangle), cruises with a healthy GPS for ``--cruise-s``, then (``--outage-s`` > 0)
+  loses GPS 1 (``SIM_GPS1_ENABLE = 0``) for that long and flies ``--after-s`` more.
+  Scored from SITL's DataFlash log: the service's and the autopilot's (POS, EKF3)
+  horizontal errors against the simulator's truth (SIM) over the healthy cruise and over
+  the outage, and the service's alerts with their times.
+* ``reboot``: on the ground, the autopilot is rebooted (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN),
+  then SITL is killed and started again; the service keeps running. Result: how long
+  after the autopilot is back (its first HEARTBEAT) the service publishes again, on the
+  autopilot's clock.
+
+``python -m tests.sitl.ardupilot_runner flight --speedup 4 --cruise-s 60 --out r.json``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+from pymavlink import mavutil
+
+from tests.sitl import harness
+from tests.sitl.dataflash import SitlLog, Track, newest_log, read_log
+from tests.sitl.harness import GroundStation, Processes, ServiceTap
+
+MAV = mavutil.mavlink
+PLANE_AUTO = 10
+COPTER_AUTO, COPTER_GUIDED = 3, 4
+COPTER_ALT_M = 25.0
+HOME_LAT, HOME_LON, HOME_ALT = -35.363261, 149.165230, 584.0
+CRUISE_ALT_M = 80.0
+ALERT_CODES = (
+    "GNSS_LOST",
+    "GNSS_BACK",
+    "GNSS_STALE",
+    "BRIDGING",
+    "FAULT",
+    "INTEGRITY",
+    "NO_GNSS",
+    "NO_DATA",
+)
+
+
+def plane_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, float]]:
+    """Home, a take-off along the runway (353 deg) and a 900 x 600 m rectangle flown in a
+    loop (DO_JUMP back to its first corner)."""
+    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def corner(n: float, e: float) -> tuple[int, int, tuple[float, ...], float, float, float]:
+        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
+        return (rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, CRUISE_ALT_M)
+
+    tk_lat, tk_lon = harness.offset_deg(HOME_LAT, HOME_LON, 300, -40)
+    return [
+        (
+            MAV.MAV_FRAME_GLOBAL,
+            MAV.MAV_CMD_NAV_WAYPOINT,
+            (0, 0, 0, 0),
+            HOME_LAT,
+            HOME_LON,
+            HOME_ALT,
+        ),
+        (rel, MAV.MAV_CMD_NAV_TAKEOFF, (15, 0, 0, 0), tk_lat, tk_lon, 40.0),
+        corner(700, -80),
+        corner(700, 520),
+        corner(-200, 520),
+        corner(-200, -80),
+        (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
+    ]
+
+
+def copter_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, float]]:
+    """Home, a take-off to 25 m and a 200 x 120 m rectangle flown in a loop."""
+    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    def corner(n: float, e: float) -> tuple[int, int, tuple[float, ...], float, float, float]:
+        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
+        return (rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, COPTER_ALT_M)
+
+    return [
+        (
+            MAV.MAV_FRAME_GLOBAL,
+            MAV.MAV_CMD_NAV_WAYPOINT,
+            (0, 0, 0, 0),
+            HOME_LAT,
+            HOME_LON,
+            HOME_ALT,
+        ),
+        (rel, MAV.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0), HOME_LAT, HOME_LON, COPTER_ALT_M),
+        corner(100, 0),
+        corner(100, 120),
+        corner(-100, 120),
+        corner(-100, 0),
+        (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
+    ]
+
+
+def _stats(errors: list[float]) -> dict[str, float | int | None]:
+    if not errors:
+        return {"n": 0, "mean_m": None, "p95_m": None, "max_m": None}
+    s = sorted(errors)
+    return {
+        "n": len(s),
+        "mean_m": statistics.fmean(s),
+        "p95_m": s[min(len(s) - 1, int(math.ceil(0.95 * len(s))) - 1)],
+        "max_m": s[-1],
+    }
+
+
+def _alerts_in(tap: ServiceTap, t0: float, t1: float) -> list[tuple[float, str]]:
+    return [(t, a) for t, a in tap.alerts if t0 <= t <= t1]
+
+
+def score_flight(
+    log: SitlLog, tap: ServiceTap, t_cruise_s: float, t_end_s: float, outage: bool
+) -> dict[str, Any]:
+    service = Track()
+    for t, lat, lon, _alt in tap.positions:
+        service.append(t, lat, lon)
+    gps = log.param_changes("SIM_GPS1_ENABLE")
+    t_off = next((t for t, v in gps if v == 0), None)
+    t_on = next((t for t, v in gps if v == 1 and t_off is not None and t > t_off), None)
+    healthy_end = t_off if (outage and t_off is not None) else t_end_s
+    out: dict[str, Any] = {
+        "t_cruise_s": t_cruise_s,
+        "t_end_s": t_end_s,
+        "healthy": {
+            "t0_s": t_cruise_s,
+            "t1_s": healthy_end,
+            "service": _stats(log.errors(service, t_cruise_s, healthy_end)),
+            "autopilot": _stats(log.errors(log.autopilot, t_cruise_s, healthy_end)),
+            "alerts": _alerts_in(tap, t_cruise_s, healthy_end),
+        },
+        "truth_points": len(log.truth.t_s),
+        "service_points": len(service.t_s),
+    }
+    if outage:
+        if t_off is None or t_on is None:
+            raise RuntimeError(f"outage not found in the log's PARM records: {gps}")
+        lost = [t for t in tap.alert_times("GNSS_LOST") if t >= t_off - 1.0]
+        back = [t for t in tap.alert_times("GNSS_BACK") if t >= t_on - 1.0]
+        ap_times = [t_off] + [t for t in log.autopilot.t_s if t_off <= t <= t_on] + [t_on]
+        out["outage"] = {
+            "t_off_s": t_off,
+            "t_on_s": t_on,
+            "autopilot_max_gap_s": max(
+                b - a for a, b in zip(ap_times[:-1], ap_times[1:], strict=True)
+            ),
+            "service": _stats(log.errors(service, t_off, t_on)),
+            "autopilot": _stats(log.errors(log.autopilot, t_off, t_on)),
+            "gnss_lost_latency_s": (lost[0] - t_off) if lost else None,
+            "gnss_back_latency_s": (back[0] - t_on) if back else None,
+            "alerts": _alerts_in(tap, t_off - 1.0, t_end_s),
+        }
+        out["after"] = {
+            "service": _stats(log.errors(service, t_on + 5.0, t_end_s)),
+            "autopilot": _stats(log.errors(log.autopilot, t_on + 5.0, t_end_s)),
+        }
+    return out
+
+
+def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
+    tap = ServiceTap()
+    harness.start_ardupilot(procs, args.vehicle, args.speedup)
+    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
+    harness.start_companion(procs, config)
+    gcs = GroundStation()
+    try:
+        gcs.wait_booted()
+        gcs.set_message_rate("GLOBAL_POSITION_INT", 5.0)
+        gcs.set_param("LOG_DISARMED", 1)
+        gcs.set_param("SIM_GPS1_ENABLE", 1)
+        for name, value in json.loads(args.params).items():
+            gcs.set_param(name, float(value))
+
+        def rel_alt() -> float:
+            gpi = gcs.latest.get("GLOBAL_POSITION_INT")
+            return -1.0 if gpi is None else gpi.relative_alt / 1000.0
+
+        if args.vehicle == "plane":
+            gcs.upload_mission(plane_circuit())
+            gcs.set_mode(PLANE_AUTO)
+            gcs.arm()
+            t_armed = gcs.now()
+            gcs.wait_until(lambda: rel_alt() > 35.0, 120.0, "take-off to 35 m")
+        else:  # copter: a guided take-off, then the mission
+            gcs.upload_mission(copter_circuit())
+            gcs.set_mode(COPTER_GUIDED)
+            gcs.arm()
+            t_armed = gcs.now()
+            gcs.command(MAV.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, COPTER_ALT_M)
+            gcs.wait_until(lambda: rel_alt() > COPTER_ALT_M - 3.0, 120.0, "take-off")
+            gcs.set_mode(COPTER_AUTO)
+        gcs.sleep(args.settle_s)
+        t_cruise = gcs.now()
+        gcs.sleep(args.cruise_s)
+        if args.outage_s > 0:
+            gcs.set_param("SIM_GPS1_ENABLE", 0)
+            gcs.sleep(args.outage_s)
+            gcs.set_param("SIM_GPS1_ENABLE", 1)
+            gcs.sleep(args.after_s)
+        t_end = gcs.now()
+        gcs.sleep(1.0)
+        if not procs.alive("companion"):
+            raise RuntimeError("companion died:\n" + procs.tail("companion"))
+    finally:
+        gcs.close()
+        procs.stop("companion")
+        procs.stop("sitl")
+        tap.close()
+    log = read_log(newest_log(procs.workdir))
+    result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0)
+    result["t_armed_s"] = t_armed
+    result["service_messages"] = dict(tap.counts)
+    result["all_alerts"] = [
+        (t, a) for t, a in tap.alerts if a.split()[1:2] and a.split()[1] in ALERT_CODES
+    ]
+    result["autopilot_statustexts"] = gcs.statustexts[-60:]
+    result["companion_log_tail"] = procs.tail("companion", 4000)
+    return result
+
+
+def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
+    tap = ServiceTap()
+    harness.start_ardupilot(procs, "plane", args.speedup)
+    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
+    harness.start_companion(procs, config)
+    gcs = GroundStation()
+    out: dict[str, Any] = {"events": []}
+    try:
+        gcs.wait_booted()
+
+        def publishing_since(t_wall: float) -> bool:
+            return tap.counts["GLOBAL_POSITION_INT"] > 0 and tap_last_wall[0] > t_wall
+
+        tap_last_wall = [0.0]
+        n_seen = [0]
+
+        def watch_tap() -> None:
+            if tap.counts["GLOBAL_POSITION_INT"] != n_seen[0]:
+                n_seen[0] = tap.counts["GLOBAL_POSITION_INT"]
+                tap_last_wall[0] = time.monotonic()
+
+        gcs.wait_until(
+            lambda: (watch_tap(), tap.counts["GLOBAL_POSITION_INT"] > 20)[1],
+            90.0,
+            "the service publishing",
+        )
+        for kind in ("reboot", "restart"):
+            boots = gcs.boot_count
+            if kind == "reboot":
+                gcs.reboot()
+            else:
+                procs.stop("sitl", wait_s=5.0)
+                time.sleep(2.0)
+                harness.start_ardupilot(procs, "plane", args.speedup, wipe=False)
+            # the autopilot is back: its clock restarted and a HEARTBEAT came after that
+            deadline = time.monotonic() + 120.0
+            while not (gcs.boot_count > boots and gcs.heartbeats_after_boot > 0):
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"autopilot not back after the {kind}")
+                time.sleep(0.02)
+            t_back = gcs.now()
+            tap_before = tap.counts["GLOBAL_POSITION_INT"]
+            first_pub: list[float] = []
+
+            def published(
+                tap_before: int = tap_before,
+                t_back: float = t_back,
+                first_pub: list[float] = first_pub,
+            ) -> bool:
+                with tap.lock:
+                    new = [p[0] for p in tap.positions[tap_before:] if p[0] < t_back + 60.0]
+                if new:
+                    first_pub.append(min(new))
+                return bool(new)
+
+            try:
+                gcs.wait_until(published, 30.0, f"publishing after the {kind}")
+                delay: float | None = first_pub[-1] - t_back
+            except TimeoutError:
+                delay = None
+            out["events"].append({"kind": kind, "t_back_s": t_back, "resume_delay_s": delay})
+            gcs.sleep(5.0)
+        out["companion_alive"] = procs.alive("companion")
+    finally:
+        gcs.close()
+        procs.stop("companion")
+        procs.stop("sitl")
+        tap.close()
+    out["companion_log_tail"] = procs.tail("companion", 4000)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("scenario", choices=["flight", "reboot"])
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--vehicle", choices=["plane", "copter"], default="plane")
+    p.add_argument("--speedup", type=float, default=4.0)
+    p.add_argument("--settle-s", type=float, default=20.0, help="after take-off, before scoring")
+    p.add_argument("--cruise-s", type=float, default=60.0)
+    p.add_argument("--outage-s", type=float, default=0.0)
+    p.add_argument("--after-s", type=float, default=30.0)
+    p.add_argument("--params", default="{}", help="autopilot parameters to set (JSON)")
+    p.add_argument("--config", default="", help="service configuration sections (JSON)")
+    p.add_argument("--keep", type=Path, help="work in this folder and keep it")
+    args = p.parse_args(argv)
+    with harness.workdir(args.keep) as wd, Processes(wd) as procs:
+        try:
+            result = (fly if args.scenario == "flight" else reboot)(args, procs)
+        except Exception:
+            traceback.print_exc()
+            for name in ("sitl", "companion"):
+                print(f"--- {name} log tail ---\n{procs.tail(name)}", file=sys.stderr)
+            return 1
+    result["args"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
+    args.out.write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
