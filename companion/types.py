@@ -195,6 +195,23 @@ class AttitudeSample:
 
 
 @dataclass(frozen=True, slots=True)
+class BaroSample:
+    """One barometer reading (SCALED_PRESSURE / SCALED_PRESSURE2, HIGHRES_IMU's abs_pressure).
+
+    ``pressure_pa`` is the static (absolute) pressure, Pa; ``temperature_c`` the sensor's
+    temperature, deg C (``None`` when not reported); ``baro_id`` 0 for SCALED_PRESSURE and
+    HIGHRES_IMU, 1 for SCALED_PRESSURE2.
+    """
+
+    t_s: float
+    t_rx_s: float
+    pressure_pa: float
+    temperature_c: float | None
+    baro_id: int = 0
+    source: str = ""
+
+
+@dataclass(frozen=True, slots=True)
 class GnssFix:
     """One GNSS fix (GPS_RAW_INT: receiver 0, GPS2_RAW: receiver 1).
 
@@ -316,6 +333,7 @@ class HeadingCommand:
 Sample = (
     ImuSample
     | AttitudeSample
+    | BaroSample
     | GnssFix
     | RtkStatus
     | HeartbeatSample

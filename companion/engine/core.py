@@ -43,6 +43,7 @@ from companion.engine.publish import Publisher, publication_time_s, tick
 from companion.engine.silence import StreamWatch
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
+from companion.nav.baro import BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
@@ -55,6 +56,8 @@ from companion.types import (
     Alert,
     AlertCode,
     AttitudeSample,
+    BaroSample,
+    FixType,
     GnssFix,
     HeadingCommand,
     ImuSample,
@@ -148,6 +151,7 @@ class Engine:
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
             ImuSample: self._on_imu,  # type: ignore[dict-item]
             AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
+            BaroSample: self._on_baro,  # type: ignore[dict-item]
             GnssFix: self._on_gnss,  # type: ignore[dict-item]
             LandedStateSample: self._on_landed,  # type: ignore[dict-item]
             VfrHudSample: self._on_vfr_hud,  # type: ignore[dict-item]
@@ -176,6 +180,10 @@ class Engine:
         self._attitude: AttitudeSample | None = None
         """The latest attitude sample (taken again when the heading correction changes)."""
         self.heading = HeadingCorrector(self._heading_config)
+        self.baro = BaroHeight(stats=self.integrity.stats)
+        """The barometer's height, calibrated against trusted GNSS (:mod:`companion.nav.baro`);
+        its rejections count in the integrity monitor's ``stats``."""
+        self._baro_source: tuple[str, int] | None = None
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -319,6 +327,33 @@ class Engine:
             self.coast.on_attitude(sample, correction_rad)
         return []
 
+    def _on_baro(self, sample: BaroSample) -> list[Output]:
+        # one barometer: the first source heard (an autopilot may send the same sensor
+        # twice, SCALED_PRESSURE and HIGHRES_IMU, at different times of validity)
+        source = (sample.source, sample.baro_id)
+        if self._baro_source is None:
+            self._baro_source = source
+        elif source != self._baro_source:
+            self.integrity.stats["baro_other_source"] += 1
+            return []
+        self.baro.on_sample(sample)
+        return []
+
+    def _baro_at(self, fix: GnssFix) -> BaroReference | None:
+        """The calibrated barometric height at the fix's time (None: none, or on the ground)."""
+        if self._on_ground():
+            return None
+        return self.baro.reference(fix.t_s, self._integrity_config.pair_max_dt_s)
+
+    def _calibrate_baro(self, fix: GnssFix, meas: GnssMeasurement) -> None:
+        """The barometer follows trusted GNSS only: fused, in normal navigation, no fault."""
+        if (
+            self.outage.mode is NavMode.NORMAL
+            and not self.integrity.fault_detected
+            and int(fix.fix_type) >= int(FixType.FIX_3D)
+        ):
+            self.baro.calibrate(fix.t_s, fix.alt_msl_m, float(meas.pos_var_ned_m2[2]))
+
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
         state = sample.landed_state
         self._landed = state
@@ -402,7 +437,9 @@ class Engine:
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{rid}_monitored"] += 1
-            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            outputs += self.integrity.on_fix(
+                fix, meas, None, references=refs, baro=self._baro_at(fix)
+            )
             return outputs
         if verdict.reinitialise:
             # rejected by the innovation alone for long enough, or after an outage beyond
@@ -414,7 +451,9 @@ class Engine:
                 self.outage.rejection_explained(rid)  # independent evidence: no reset clock
             else:
                 self.outage.rejected(fix)
-            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            outputs += self.integrity.on_fix(
+                fix, meas, None, references=refs, baro=self._baro_at(fix)
+            )
             return outputs
         predicted = self.bridge.reference(meas.t_s)
         update = navs.on_gnss(meas, verdict.gate)
@@ -444,8 +483,15 @@ class Engine:
         # nor must the innovation of a fix the receiver's own evidence vouches for
         bridged = (verdict.gate and self.outage.mode in OUTAGE_MODES) or vouched
         outputs += self.integrity.on_fix(
-            fix, meas, None if bridged else update, predicted=predicted, references=refs
+            fix,
+            meas,
+            None if bridged else update,
+            predicted=predicted,
+            references=refs,
+            baro=self._baro_at(fix),
         )
+        if update.fused:
+            self._calibrate_baro(fix, meas)
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
