@@ -184,6 +184,7 @@ class Engine:
         """The barometer's height, calibrated against trusted GNSS (:mod:`companion.nav.baro`);
         its rejections count in the integrity monitor's ``stats``."""
         self._baro_source: tuple[str, int] | None = None
+        self._engine_baro_in_blend = self.config.baro_in_blend
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -336,8 +337,28 @@ class Engine:
         elif source != self._baro_source:
             self.integrity.stats["baro_other_source"] += 1
             return []
-        self.baro.on_sample(sample)
+        if self.baro.on_sample(sample) and self.outage.mode in OUTAGE_MODES:
+            self._baro_to_blend(sample.t_s)
         return []
+
+    def _baro_to_blend(self, t_s: float) -> None:
+        """Through a GNSS gap, the calibrated barometer's height into the blend."""
+        blend, frame = self.navigators.primary, self.frame
+        if (
+            not self._engine_baro_in_blend
+            or frame is None
+            or not isinstance(blend, BlendNavigator)
+            or self.navigators.navigator is not blend
+            or not blend.initialised
+        ):
+            return
+        ref = self.baro.reference(t_s, 0.0)
+        state = blend.predict(blend.imu_t_s) if ref is not None else None
+        if ref is None or state is None:
+            return
+        lat, lon, _ = frame.ned_to_lla(state.pos_ned_m)
+        pos_d_m = float(frame.lla_to_ned(lat, lon, ref.alt_msl_m)[2])
+        blend.on_height(t_s, pos_d_m, ref.var_m2, ref.offset_var_m2)
 
     def _baro_at(self, fix: GnssFix) -> BaroReference | None:
         """The calibrated barometric height at the fix's time (None: none, or on the ground)."""

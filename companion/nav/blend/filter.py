@@ -302,6 +302,61 @@ class BlendNavigator:
         self.diag.fused += 1
         return GnssUpdate(meas.t_s, True, nis, dof, threshold, innov_pos, s_pos)
 
+    def on_height(self, t_s: float, pos_d_m: float, var_m2: float, floor_var_m2: float) -> bool:
+        """Fuse an independent height (the calibrated barometer) as the down position at
+        ``t_s`` (m, local NED), variance ``var_m2`` (its white noise and calibration
+        offset); False when refused (counted in ``diag.rejected``).
+
+        The offset is common to every height until the next calibration: repeated updates
+        would average it away, so the down-position variance is then floored at
+        ``floor_var_m2`` (the offset's variance; Schmidt's consider idea, in its simplest
+        conservative form). Its differences stay exact: the vertical velocity is what the
+        heights carry through a GNSS gap.
+        """
+        if not self._init:
+            return False
+        if not (math.isfinite(t_s) and math.isfinite(pos_d_m) and math.isfinite(var_m2)):
+            self._reject("height_not_finite")
+            return False
+        if var_m2 <= 0.0 or not floor_var_m2 >= 0.0:
+            self._reject("height_variance")
+            return False
+        cfg = self.config
+        mech = self._mech
+        if t_s > mech.t_s + cfg.cov_interval_s or (self._hist and t_s < self._hist[0].t_s):
+            self._reject("height_outside_history")
+            return False
+        idx, pos_m, vel_m, _ = state_at(self._hist, mech, t_s, self._cov_interval_s)
+        snap = self._hist[idx]
+        p_m = snap.p_mat
+        dt_p = t_s - snap.t_s
+        if dt_p > 0.0:
+            p_m = carry_pos_vel(p_m, dt_p, self.diag.accel_psd_ned)
+        h_mat = np.zeros((1, N_STATE))
+        h_mat[0, ins.IP + 2] = 1.0
+        y = np.array([pos_m[2] - pos_d_m])
+        try:
+            corr = joseph_update_diag_r(p_m, y, h_mat, np.array([var_m2]))
+        except ValueError:
+            self._reject("height_cov_not_pd")
+            return False
+        if corr.nis > self._gates[1]:
+            self._reject("height_gate")
+            return False
+        d = corr.dx.tolist()
+        lag = snap.t_s - t_s
+        d[0] += lag * d[3]
+        d[1] += lag * d[4]
+        d[2] += lag * d[5]
+        p_post = corr.p_post
+        k = ins.IP + 2
+        if p_post[k, k] < floor_var_m2:
+            p_post = p_post.copy()
+            p_post[k, k] = floor_var_m2
+        self._apply(idx, d, p_post)
+        self.diag.heights_fused += 1
+        return True
+
     def predict(self, t_s: float) -> NavState | None:
         """The state carried from the newest IMU time to ``t_s`` (constant velocity), unchanged."""
         if not self._init:
