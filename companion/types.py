@@ -140,6 +140,7 @@ class AlertCode(enum.Enum):
     NO_DATA = "NO_DATA"
     DATA_BACK = "DATA_BACK"
     NO_GNSS = "NO_GNSS"
+    IMU_GRADE = "IMU_GRADE"
 
 
 class HeadingAction(enum.Enum):

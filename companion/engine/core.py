@@ -48,7 +48,9 @@ from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
+from companion.nav.grades import IMU_GRADES
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
+from companion.nav.imu_check import ImuNoiseCheck
 from companion.nav.navigator import GnssMeasurement, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
@@ -145,6 +147,9 @@ class Engine:
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
+        self._grade_widened = False
+        """The IMU's measured noise exceeded its configured grade: the references are off
+        for good (:meth:`_widen_grade`)."""
         self._sample_counts: Counter[type] = Counter()
         self._publish_rate_hz = self.config.publish_rate_hz
         self.stats = EngineStats()
@@ -185,6 +190,10 @@ class Engine:
         its rejections count in the integrity monitor's ``stats``."""
         self._baro_source: tuple[str, int] | None = None
         self._engine_baro_in_blend = self.config.baro_in_blend
+        self.imu_check = self._imu_check()
+        """The IMU's measured noise against its configured grade (None: nothing wider to
+        fall back to)."""
+        self._imu_source: tuple[str, int] | None = None
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -316,7 +325,55 @@ class Engine:
     def _on_imu(self, sample: ImuSample) -> list[Output]:
         if self.navigators.on_imu(sample) and self.coast is not None:
             self.coast.on_imu(sample)
-        return []
+        check = self.imu_check
+        if check is None:
+            return []
+        source = (sample.source, sample.imu_id)
+        if self._imu_source is None:
+            self._imu_source = source
+        if source != self._imu_source:
+            return []
+        verdict = check.on_imu(sample)
+        if verdict is None or not verdict.doubted:
+            return []
+        return self._widen_grade(verdict.t_s, verdict.gyro_ratio, verdict.acc_ratio)
+
+    def _imu_check(self) -> ImuNoiseCheck | None:
+        """The noise check of the configured blend grade, when a wider grade (the MEMS
+        autopilot IMU's) exists to fall back to."""
+        cfg, mems = self._blend_config, IMU_GRADES["mems"]
+        if (
+            cfg.gyro_arw_rad_rts >= mems.gyro_noise_density_radps_rthz
+            and cfg.accel_vrw_mps_rts >= mems.acc_noise_density_mps2_rthz
+        ):
+            return None
+        return ImuNoiseCheck(cfg.gyro_arw_rad_rts, cfg.accel_vrw_mps_rts)
+
+    def _widen_grade(self, t_s: float, gyro_ratio: float, acc_ratio: float) -> list[Output]:
+        """The IMU is noisier than its configured grade: the MEMS grade from now on for the
+        blend (attitude-aided) and no inertial references, the navigation restarted from
+        the next fix (a receiver excluded on the narrow grade's word is pardoned)."""
+        mems = BlendConfig.for_grade("mems")
+        cfg = self._blend_config
+        self._blend_config = dataclasses.replace(
+            cfg,
+            mode=mems.mode,
+            accel_vrw_mps_rts=max(cfg.accel_vrw_mps_rts, mems.accel_vrw_mps_rts),
+            gyro_arw_rad_rts=max(cfg.gyro_arw_rad_rts, mems.gyro_arw_rad_rts),
+            accel_bias_sigma_mps2=max(cfg.accel_bias_sigma_mps2, mems.accel_bias_sigma_mps2),
+            gyro_bias_sigma_radps=max(cfg.gyro_bias_sigma_radps, mems.gyro_bias_sigma_radps),
+        )
+        self._coast_config = CoastConfig.for_grade("mems")
+        self._grade_widened = True
+        self.imu_check = None
+        self.integrity.stats["imu_grade_widened"] += 1
+        self._restart_navigation()
+        text = (
+            f"IMU noise gyro {gyro_ratio:.1f}x accel {acc_ratio:.1f}x its grade's: "
+            "widened to mems, restart; receiver not blamed"
+        )
+        log.warning("t=%.2f s IMU grade doubted: %s", t_s, text)
+        return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
@@ -655,7 +712,11 @@ class Engine:
     def _anchor(self, frame: LocalFrame) -> None:
         self.frame = frame
         self.navigators.shift_frame(frame, frame)
-        if self.navigators.primary is not None and self.config.inertial_reference:
+        if (
+            self.navigators.primary is not None
+            and self.config.inertial_reference
+            and not self._grade_widened
+        ):
             gravity = gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
             self.coast = InertialCoast(self._coast_config, gravity)
 
