@@ -415,7 +415,7 @@ class Engine:
             return
         lat, lon, _ = frame.ned_to_lla(state.pos_ned_m)
         pos_d_m = float(frame.lla_to_ned(lat, lon, ref.alt_msl_m)[2])
-        blend.on_height(t_s, pos_d_m, ref.var_m2, ref.offset_var_m2)
+        blend.on_height(t_s, pos_d_m, ref.white_var_m2, ref.offset_var_m2)
 
     def _baro_at(self, fix: GnssFix) -> BaroReference | None:
         """The calibrated barometric height at the fix's time (None: none, or on the ground)."""

@@ -13,7 +13,8 @@ b' = d + w_b ,   d' = w_d ,   z = h_baro(t_fix) - h_gnss = b + v
 
 updated from trusted GNSS heights at most every ``calib_interval_s`` (the receiver's
 height error is correlated over minutes: a faster rate would count one error many
-times). The calibrated height is ``h_baro - b`` with variance ``P_bb`` (an offset
+times), each against a straight line fitted to that interval's readings (the
+vertical motion taken out, the readings' white noise averaged). The calibrated height is ``h_baro - b`` with variance ``P_bb`` (an offset
 over a separation window), ``P_dd`` (a rate) and the sensor's white noise, measured
 from the second differences of the readings (``var(h_k - 2 h_{k-1} + h_{k-2}) =
 6 sigma^2`` for white noise), floored at ``noise_floor_m``. ``P_bb`` is never below
@@ -220,6 +221,24 @@ class BaroHeight:
                 return ha + (hb - ha) * (t_s - ta) / (tb - ta)
         return None
 
+    def fitted_height_at(self, t_s: float, span_s: float) -> tuple[float, float] | None:
+        """The uncalibrated height at ``t_s`` from a straight line fitted to the readings
+        of the last ``span_s`` before it (the vertical motion taken out, the white noise
+        averaged), and its variance from the white noise (m, m^2); None with fewer than
+        three readings there."""
+        pts = [(t, h) for t, h in self._readings if t_s - span_s <= t <= t_s + 1e-9]
+        n = len(pts)
+        if n < 3:
+            return None
+        t_mean = sum(t for t, _ in pts) / n
+        h_mean = sum(h for _, h in pts) / n
+        sxx = sum((t - t_mean) ** 2 for t, _ in pts)
+        if sxx <= 0.0:
+            return None
+        b = sum((t - t_mean) * (h - h_mean) for t, h in pts) / sxx
+        u = t_s - t_mean
+        return h_mean + b * u, self.white_var_m2 * (1.0 / n + u * u / sxx)
+
     def _predict(self, t_s: float) -> tuple[list[float], list[list[float]]]:
         """The calibration carried to ``t_s`` (not stored)."""
         x, p = self._x, self._p
@@ -243,11 +262,12 @@ class BaroHeight:
         cfg = self.config
         if self._t_cal is not None and t_s - self._t_cal < cfg.calib_interval_s:
             return False
-        h = self.raw_height_at(t_s, cfg.timeout_s)
-        if h is None:
+        fitted = self.fitted_height_at(t_s, cfg.calib_interval_s)
+        if fitted is None:
             return False
+        h, h_var = fitted
         z = h - alt_msl_m
-        r = var_m2 + self.white_var_m2
+        r = var_m2 + h_var
         if self._t_cal is None:
             self._x = [z, 0.0]
             self._p = [[r, 0.0], [0.0, cfg.initial_drift_sigma_mps**2]]
