@@ -195,9 +195,9 @@ class BaroHeight:
                 self._reset_calibration()
             else:
                 self._jumps = 0
-                # exponentially weighted second-difference variance (about 50 readings)
+                # exponentially weighted second-difference variance (about 200 readings)
                 self._d2_n += 1
-                a = max(1.0 / self._d2_n, 0.02)
+                a = max(1.0 / self._d2_n, 0.005)
                 self._d2_var += a * (d2 * d2 - self._d2_var)
         r.append((t, h))
         while r and r[0][0] < t - self.config.history_s:

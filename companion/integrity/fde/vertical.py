@@ -52,6 +52,18 @@ RHO_STEPS_PER_DECADE = 8
 """Grid of the correlated-to-white variance ratio (rounded up to it)."""
 RHO_MIN = 1e-3
 """Smallest ratio used: a receiver's part below it is taken as this."""
+DT_STEPS_PER_DECADE = 32
+"""Grid of the sampling interval (rounded down to it: a shorter interval for the same
+number of samples only raises the slope threshold), which caches the thresholds of a
+receiver whose interval jitters by a few milliseconds."""
+
+
+def dt_grid_ms(dt_s: float) -> int:
+    """``dt_s`` in whole milliseconds rounded down to the grid of
+    :data:`DT_STEPS_PER_DECADE` per decade (at least 1 ms)."""
+    ms = max(dt_s * 1e3, 1.0)
+    k = math.floor(DT_STEPS_PER_DECADE * math.log10(ms) + 1e-9)
+    return max(1, math.floor(10.0 ** (k / DT_STEPS_PER_DECADE) + 1e-9))
 
 
 def rho_grid(rho: float) -> float:
@@ -185,9 +197,7 @@ class VerticalSeparation:
             return None
         white = float(arr[:, 2].mean())
         rho = rho_grid(float(arr[:, 3].mean()) / white)
-        sb, k_s, rss_th = vertical_thresholds(
-            n, max(1, round(mean_dt * 1e3)), rho, self.p_slope, self.p_rss
-        )
+        sb, k_s, rss_th = vertical_thresholds(n, dt_grid_ms(mean_dt), rho, self.p_slope, self.p_rss)
         tc = t - t.mean()
         sxx = float(tc @ tc)
         b = float(tc @ s) / sxx
