@@ -505,7 +505,9 @@ def baro_flight(case: Case | None, seed: int) -> BaroOutcome:
         t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
         fault = case.fault(t0, direction(rng, case.axis))
         events = (fault.as_event(t0 + 1000.0),)
-    scenario = sim.make_scenario("approach", imu_grade="mems", events=events, realism=baro_realism())
+    scenario = sim.make_scenario(
+        "approach", imu_grade="mems", events=events, realism=baro_realism()
+    )
     flight = sim.simulate(scenario, seed=seed)
     blend_cfg = BlendConfig.for_grade("mems")
     coast_cfg = CoastConfig.for_grade("mems")

@@ -323,6 +323,10 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("OUT_MAX_HDOP", "outage.max_hdop"),
     ("OUT_CONTRA_SIG", "outage.contradiction_sigmas"),
     ("OUT_TIMEOUT_NFIX", "outage.timeout_fix_intervals"),
+    ("ENG_BARO_BLEND", "engine.baro_in_blend"),
+    ("INT_BARO_REF", "integrity.baro_reference"),
+    ("INT_BARO_WIN", "integrity.baro_window_s"),
+    ("INT_BARO_MIN_H", "integrity.baro_min_height_m"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

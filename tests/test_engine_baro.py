@@ -44,7 +44,7 @@ def test_barometer_carries_the_height_through_a_gnss_gap() -> None:
             result[use] = (np.array(errs), blend.diag.heights_fused)  # type: ignore[attr-defined]
     finally:
         logging.disable(logging.NOTSET)
-    (without, n0), (with_baro, n1) = result[False], result[True]
+    (_, n0), (with_baro, n1) = result[False], result[True]
     assert n0 == 0 and n1 > 150  # 10 Hz through the gap
     assert with_baro[:, 0].mean() <= 0.5
     # never confidently wrong: within 3 published sigmas throughout

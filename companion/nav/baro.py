@@ -14,10 +14,11 @@ b' = d + w_b ,   d' = w_d ,   z = h_baro(t_fix) - h_gnss = b + v
 updated from trusted GNSS heights at most every ``calib_interval_s`` (the receiver's
 height error is correlated over minutes: a faster rate would count one error many
 times), each against a straight line fitted to that interval's readings (the
-vertical motion taken out, the readings' white noise averaged). The calibrated height is ``h_baro - b`` with variance ``P_bb`` (an offset
-over a separation window), ``P_dd`` (a rate) and the sensor's white noise, measured
-from the second differences of the readings (``var(h_k - 2 h_{k-1} + h_{k-2}) =
-6 sigma^2`` for white noise), floored at ``noise_floor_m``. ``P_bb`` is never below
+vertical motion taken out, the readings' white noise averaged). The calibrated
+height is ``h_baro - b`` with variance ``P_bb`` (an offset over a separation
+window), ``P_dd`` (a rate) and the sensor's white noise, measured from the second
+differences of the readings (``var(h_k - 2 h_{k-1} + h_{k-2}) = 6 sigma^2`` for
+white noise), floored at ``noise_floor_m``. ``P_bb`` is never below
 the variance of the GNSS height it was calibrated against, nor ``P_dd`` below that
 over ``memory_s`` squared: averaging a receiver's correlated error does not remove it.
 

@@ -33,7 +33,6 @@ Bulletin 2(6), 1946.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from scipy.stats import chi2

@@ -38,8 +38,8 @@ from companion.mavlink import units
 from companion.nav.rotations import quat_to_euler
 from companion.types import (
     AttitudeSample,
-    BaroSample,
     AutopilotSolution,
+    BaroSample,
     FixType,
     FloatArray,
     GnssFix,

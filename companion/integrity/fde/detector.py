@@ -201,9 +201,7 @@ class FaultDetector:
 
         if rx.last_meas is not None and rx.last_meas.fix_type != meas.fix_type:
             self.pairs.restart_receiver(rid)
-        sep_results = self.pairs.separations(
-            meas, self._receivers, references, baro, fix.alt_msl_m
-        )
+        sep_results = self.pairs.separations(meas, self._receivers, references, baro, fix.alt_msl_m)
         innov_failed, fix_reasons = self._fix_tests.run(meas, update, predicted)
         if update is not None and update.dof > 0 and math.isfinite(update.nis):
             rx.last_nis = update.nis / update.dof

@@ -60,4 +60,6 @@ class BaroDecoder:
         p_pa = float(msg.abs_pressure) * PA_PER_HPA
         _check(p_pa)
         temp = float(msg.temperature)
-        return BaroSample(t_s, t_rx_s, p_pa, temp if math.isfinite(temp) else None, 0, "HIGHRES_IMU")
+        return BaroSample(
+            t_s, t_rx_s, p_pa, temp if math.isfinite(temp) else None, 0, "HIGHRES_IMU"
+        )

@@ -306,7 +306,9 @@ class BlendNavigator:
         self.diag.fused += 1
         return GnssUpdate(meas.t_s, True, nis, dof, threshold, innov_pos, s_pos)
 
-    def on_height(self, t_s: float, pos_d_m: float, white_var_m2: float, offset_var_m2: float) -> bool:
+    def on_height(
+        self, t_s: float, pos_d_m: float, white_var_m2: float, offset_var_m2: float
+    ) -> bool:
         """Fuse an independent height (the calibrated barometer) as the down position at
         ``t_s`` (m, local NED); False when refused (counted in ``diag.rejected``).
 
