@@ -13,14 +13,17 @@ b' = d + w_b ,   d' = w_d ,   z = h_baro(t_fix) - h_gnss = b + v
 
 updated from trusted GNSS heights at most every ``calib_interval_s`` (the receiver's
 height error is correlated over minutes: a faster rate would count one error many
-times), each against a straight line fitted to that interval's readings (the
+times; each counts the GNSS height's variance ``gnss_corr_s`` update intervals
+over), each against a straight line fitted to that interval's readings (the
 vertical motion taken out, the readings' white noise averaged). The calibrated
 height is ``h_baro - b`` with variance ``P_bb`` (an offset over a separation
 window), ``P_dd`` (a rate) and the sensor's white noise, measured from the second
 differences of the readings (``var(h_k - 2 h_{k-1} + h_{k-2}) = 6 sigma^2`` for
-white noise), floored at ``noise_floor_m``. ``P_bb`` is never below
+white noise), floored at ``noise_floor_m``. The published ``P_bb`` is never below
 the variance of the GNSS height it was calibrated against, nor ``P_dd`` below that
 over ``memory_s`` squared: averaging a receiver's correlated error does not remove it.
+A calibration resumed after a pause of more than ``resume_restart_s`` starts a new
+``epoch`` (the separation series restart with it).
 
 Bad readings are turned away and counted (``stats``): a reading that jumps from
 the track of the last two by more than ``max_vertical_accel_mps2 dt^2`` plus
@@ -71,8 +74,8 @@ class BaroConfig:
 
     noise_floor_m: float = ranged(0.1, gt=0.0)
     """Least white noise of a reading, 1-sigma, m (the measured one is used when larger)."""
-    offset_rw_m2ps: float = ranged(2.5e-5, ge=0.0)
-    """Random-walk density of the offset (temperature, sensor), m^2/s: 0.3 m per hour."""
+    offset_rw_m2ps: float = ranged(2.5e-6, ge=0.0)
+    """Random-walk density of the offset (temperature, sensor), m^2/s: 0.1 m per hour."""
     drift_rw_m2ps3: float = ranged(1e-9, ge=0.0)
     """Random-walk density of the offset's rate (the weather's pressure tendency
     changing over hours: 1 hPa/h, about 2 mm/s, over three hours), m^2/s^3."""
@@ -80,6 +83,14 @@ class BaroConfig:
     """1-sigma of the offset's rate before calibration (3 hPa/h), m/s."""
     calib_interval_s: float = ranged(1.0, gt=0.0)
     """At most one calibration update per this long, s."""
+    gnss_corr_s: float = ranged(60.0, gt=0.0)
+    """Correlation time of the receiver's height error, s: each calibration update counts
+    the GNSS height's variance this many update intervals over (``R = var gnss_corr_s /
+    calib_interval_s``), so that the calibration follows the receiver over minutes, not
+    seconds, and a slow ramp of the receiver shows against it before it is absorbed."""
+    resume_restart_s: float = ranged(10.0, gt=0.0)
+    """A calibration resumed after a pause longer than this (a fault, a gap) may move the
+    height by more than its noise at once: the separation series restarts with it."""
     calib_min_s: float = ranged(10.0, ge=0.0)
     """The height is offered once calibrated over at least this long, s."""
     memory_s: float = ranged(600.0, gt=0.0)
@@ -143,6 +154,7 @@ class BaroHeight:
         self._p = [[0.0, 0.0], [0.0, 0.0]]
         self._t_cal: float | None = None
         self._t_cal_start: float | None = None
+        self._gnss_var_m2 = 0.0
 
     @property
     def calibrated(self) -> bool:
@@ -268,12 +280,15 @@ class BaroHeight:
             return False
         h, h_var = fitted
         z = h - alt_msl_m
-        r = var_m2 + h_var
+        r = var_m2 * cfg.gnss_corr_s / cfg.calib_interval_s + h_var
+        self._gnss_var_m2 = var_m2
         if self._t_cal is None:
             self._x = [z, 0.0]
             self._p = [[r, 0.0], [0.0, cfg.initial_drift_sigma_mps**2]]
             self._t_cal = self._t_cal_start = t_s
             return True
+        if t_s - self._t_cal > cfg.resume_restart_s:
+            self.epoch += 1  # resumed after a pause: a new separation series
         x, p = self._predict(t_s)
         s = p[0][0] + r
         k0, k1 = p[0][0] / s, p[0][1] / s
@@ -283,11 +298,6 @@ class BaroHeight:
         p00 = p[0][0] - k0 * p[0][0]
         p01 = p[0][1] - k0 * p[0][1]
         p11 = p[1][1] - k1 * p[0][1]
-        # floors: the receiver's correlated error is not averaged away
-        p00 = max(p00, var_m2)
-        p11 = max(p11, var_m2 / cfg.memory_s**2)
-        lim = math.sqrt(p00 * p11)
-        p01 = min(max(p01, -lim), lim)
         self._x, self._p = x, [[p00, p01], [p01, p11]]
         self._t_cal = t_s
         return True
@@ -301,7 +311,11 @@ class BaroHeight:
         if h is None:
             return None
         x, p = self._predict(t_s)
-        return BaroReference(t_s, h - x[0], self.white_var_m2, p[0][0], p[1][1], self.epoch)
+        # floors: the receiver's correlated error is not averaged away
+        g = self._gnss_var_m2
+        offset_var = max(p[0][0], g)
+        drift_var = max(p[1][1], g / self.config.memory_s**2)
+        return BaroReference(t_s, h - x[0], self.white_var_m2, offset_var, drift_var, self.epoch)
 
     def reset(self) -> None:
         """Forget the readings and the calibration (a reboot); ``stats`` kept."""

@@ -228,13 +228,19 @@ class FaultDetector:
             self._fault_sep_h_m = max(self._fault_sep_h_m, float(np.hypot(*res.sep_ned_m[:2])))
             self._fault_sep_v_m = max(self._fault_sep_v_m, abs(float(res.sep_ned_m[2])))
             if key[1] == BARO_REF:
-                # the receiver's height against the barometer's: two solutions, and
-                # nothing to say which is wrong (the barometer's calibration is not
-                # updated while a fault is detected)
+                # the receiver's height against the barometer's (calibrated against the
+                # fused receiver while no fault is detected)
                 self.stats["baro_disagrees"] += 1
-                unresolved = True
-                if attribution.episode_start_s is None:
-                    attribution.episode_start_s = t
+                if rid in culprits or t < rx.excluded_until_s:
+                    culprits.add(rid)  # already found faulty: it stays excluded
+                elif update is None and self._other_receivers(rid, t):
+                    # not fused, another receiver is: the receiver pair's own tests judge
+                    self.stats["baro_vs_unfused"] += 1
+                else:
+                    # two heights, and nothing to say which is wrong
+                    unresolved = True
+                    if attribution.episode_start_s is None:
+                        attribution.episode_start_s = t
                 continue
             if key[1].startswith(REF_PREFIX):
                 if rid in culprits or t < rx.excluded_until_s:
