@@ -633,7 +633,8 @@ def baro_sections(runs: int, hours: float, gap_runs: int, jobs: int, seed: int) 
         print(f"  monitor counters (nominal, with barometer): {stats}")
     if gaps:
         print(f"\n20 s GNSS gap in the glide, MEMS IMU, engine ({len(gaps)} seeded flights)")
-        print(f"{'':<22} {'H err mean m':>13} {'max of means':>13} {'max m':>7} {'in 95 %':>8}")
+        head = f"{'height error':<22} {'mean m':>13} {'max of means':>13} {'max m':>7}"
+        print(f"{head} {'in 95 %':>8}")
         for label, cells in (
             ("without barometer", [g.without for g in gaps]),
             ("with barometer", [g.with_baro for g in gaps]),
