@@ -327,6 +327,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("INT_BARO_REF", "integrity.baro_reference"),
     ("INT_BARO_WIN", "integrity.baro_window_s"),
     ("INT_BARO_MIN_H", "integrity.baro_min_height_m"),
+    ("ENG_IMU_CHECK", "engine.imu_grade_check"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -342,7 +342,7 @@ class Engine:
         """The noise check of the configured blend grade, when a wider grade (the MEMS
         autopilot IMU's) exists to fall back to."""
         cfg, mems = self._blend_config, IMU_GRADES["mems"]
-        if (
+        if not self.config.imu_grade_check or (
             cfg.gyro_arw_rad_rts >= mems.gyro_noise_density_radps_rthz
             and cfg.accel_vrw_mps_rts >= mems.acc_noise_density_mps2_rthz
         ):

@@ -232,7 +232,7 @@ class FaultDetector:
                 # fused receiver while no fault is detected)
                 self.stats["baro_disagrees"] += 1
                 if rid in culprits or t < rx.excluded_until_s:
-                    culprits.add(rid)  # already found faulty: it stays excluded
+                    self.stats["baro_vs_excluded"] += 1  # already found faulty
                 elif update is None and self._other_receivers(rid, t):
                     # not fused, another receiver is: the receiver pair's own tests judge
                     self.stats["baro_vs_unfused"] += 1
