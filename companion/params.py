@@ -326,6 +326,11 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENC_GPS_ID_AUTO", "encoder.gps_id_from_autopilot"),
     ("ENG_PUB_ON_FIX", "engine.publish_on_fix"),
     ("ENG_PUB_MIN_INT", "engine.min_publish_interval_s"),
+    ("ENG_BARO_BLEND", "engine.baro_in_blend"),
+    ("INT_BARO_REF", "integrity.baro_reference"),
+    ("INT_BARO_WIN", "integrity.baro_window_s"),
+    ("INT_BARO_MIN_H", "integrity.baro_min_height_m"),
+    ("ENG_IMU_CHECK", "engine.imu_grade_check"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -141,6 +141,7 @@ class AlertCode(enum.Enum):
     DATA_BACK = "DATA_BACK"
     NO_GNSS = "NO_GNSS"
     AP_CONFIG = "AP_CONFIG"
+    IMU_GRADE = "IMU_GRADE"
 
 
 class HeadingAction(enum.Enum):
@@ -193,6 +194,23 @@ class AttitudeSample:
     pitch_rad: float
     yaw_rad: float
     rate_b_radps: FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class BaroSample:
+    """One barometer reading (SCALED_PRESSURE / SCALED_PRESSURE2, HIGHRES_IMU's abs_pressure).
+
+    ``pressure_pa`` is the static (absolute) pressure, Pa; ``temperature_c`` the sensor's
+    temperature, deg C (``None`` when not reported); ``baro_id`` 0 for SCALED_PRESSURE and
+    HIGHRES_IMU, 1 for SCALED_PRESSURE2.
+    """
+
+    t_s: float
+    t_rx_s: float
+    pressure_pa: float
+    temperature_c: float | None
+    baro_id: int = 0
+    source: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -317,6 +335,7 @@ class HeadingCommand:
 Sample = (
     ImuSample
     | AttitudeSample
+    | BaroSample
     | GnssFix
     | RtkStatus
     | HeartbeatSample

@@ -89,6 +89,14 @@ class EngineConfig:
     ``NO_GNSS``, the service is not navigating."""
     no_gnss_repeat_s: float = ranged(30.0, gt=0.0)
     """``NO_GNSS`` is repeated at this interval while no usable fix arrives."""
+    baro_in_blend: bool = True
+    """Through a GNSS gap, fuse the barometer's height (calibrated against trusted GNSS
+    before the gap, :mod:`companion.nav.baro`) into the blend as a down-position
+    measurement: height is what an IMU loses first (El-Mowafy 2005)."""
+    imu_grade_check: bool = True
+    """Compare the IMU's measured white noise with the blend's configured grade when that
+    grade is narrower than a MEMS autopilot IMU's; when it is noisier, ``IMU_GRADE``, the
+    MEMS grade and a restart from the next fix (no receiver blamed)."""
 
     def __post_init__(self) -> None:
         check_ranges(self)

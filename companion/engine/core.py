@@ -50,11 +50,14 @@ from companion.engine.publish import Publisher, publication_time_s, tick
 from companion.engine.silence import StreamWatch
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
+from companion.nav.baro import BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
+from companion.nav.grades import IMU_GRADES
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
+from companion.nav.imu_check import ImuNoiseCheck
 from companion.nav.navigator import GnssMeasurement, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
@@ -62,6 +65,8 @@ from companion.types import (
     Alert,
     AlertCode,
     AttitudeSample,
+    BaroSample,
+    FixType,
     GnssFix,
     HeadingCommand,
     ImuSample,
@@ -162,12 +167,16 @@ class Engine:
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
+        self._grade_widened = False
+        """The IMU's measured noise exceeded its configured grade: the references are off
+        for good (:meth:`_widen_grade`)."""
         self._sample_counts: Counter[type] = Counter()
         self._publish_rate_hz = self.config.publish_rate_hz
         self.stats = EngineStats()
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
             ImuSample: self._on_imu,  # type: ignore[dict-item]
             AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
+            BaroSample: self._on_baro,  # type: ignore[dict-item]
             GnssFix: self._on_gnss,  # type: ignore[dict-item]
             LandedStateSample: self._on_landed,  # type: ignore[dict-item]
             VfrHudSample: self._on_vfr_hud,  # type: ignore[dict-item]
@@ -204,6 +213,15 @@ class Engine:
         self._attitude: AttitudeSample | None = None
         """The latest attitude sample (taken again when the heading correction changes)."""
         self.heading = HeadingCorrector(self._heading_config)
+        self.baro = BaroHeight(stats=self.integrity.stats)
+        """The barometer's height, calibrated against trusted GNSS (:mod:`companion.nav.baro`);
+        its rejections count in the integrity monitor's ``stats``."""
+        self._baro_source: tuple[str, int] | None = None
+        self._engine_baro_in_blend = self.config.baro_in_blend
+        self.imu_check = self._imu_check()
+        """The IMU's measured noise against its configured grade (None: nothing wider to
+        fall back to)."""
+        self._imu_source: tuple[str, int] | None = None
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -373,7 +391,55 @@ class Engine:
     def _on_imu(self, sample: ImuSample) -> list[Output]:
         if self.navigators.on_imu(sample) and self.coast is not None:
             self.coast.on_imu(sample)
-        return []
+        check = self.imu_check
+        if check is None:
+            return []
+        source = (sample.source, sample.imu_id)
+        if self._imu_source is None:
+            self._imu_source = source
+        if source != self._imu_source:
+            return []
+        verdict = check.on_imu(sample)
+        if verdict is None or not verdict.doubted:
+            return []
+        return self._widen_grade(verdict.t_s, verdict.gyro_ratio, verdict.acc_ratio)
+
+    def _imu_check(self) -> ImuNoiseCheck | None:
+        """The noise check of the configured blend grade, when a wider grade (the MEMS
+        autopilot IMU's) exists to fall back to."""
+        cfg, mems = self._blend_config, IMU_GRADES["mems"]
+        if not self.config.imu_grade_check or (
+            cfg.gyro_arw_rad_rts >= mems.gyro_noise_density_radps_rthz
+            and cfg.accel_vrw_mps_rts >= mems.acc_noise_density_mps2_rthz
+        ):
+            return None
+        return ImuNoiseCheck(cfg.gyro_arw_rad_rts, cfg.accel_vrw_mps_rts)
+
+    def _widen_grade(self, t_s: float, gyro_ratio: float, acc_ratio: float) -> list[Output]:
+        """The IMU is noisier than its configured grade: the MEMS grade from now on for the
+        blend (attitude-aided) and no inertial references, the navigation restarted from
+        the next fix (a receiver excluded on the narrow grade's word is pardoned)."""
+        mems = BlendConfig.for_grade("mems")
+        cfg = self._blend_config
+        self._blend_config = dataclasses.replace(
+            cfg,
+            mode=mems.mode,
+            accel_vrw_mps_rts=max(cfg.accel_vrw_mps_rts, mems.accel_vrw_mps_rts),
+            gyro_arw_rad_rts=max(cfg.gyro_arw_rad_rts, mems.gyro_arw_rad_rts),
+            accel_bias_sigma_mps2=max(cfg.accel_bias_sigma_mps2, mems.accel_bias_sigma_mps2),
+            gyro_bias_sigma_radps=max(cfg.gyro_bias_sigma_radps, mems.gyro_bias_sigma_radps),
+        )
+        self._coast_config = CoastConfig.for_grade("mems")
+        self._grade_widened = True
+        self.imu_check = None
+        self.integrity.stats["imu_grade_widened"] += 1
+        self._restart_navigation()
+        text = (
+            f"IMU noise gyro {gyro_ratio:.1f}x accel {acc_ratio:.1f}x its grade's: "
+            "widened to mems, restart; receiver not blamed"
+        )
+        log.warning("t=%.2f s IMU grade doubted: %s", t_s, text)
+        return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
@@ -384,6 +450,53 @@ class Engine:
         if self.navigators.on_attitude(sample, correction_rad) and self.coast is not None:
             self.coast.on_attitude(sample, correction_rad)
         return []
+
+    def _on_baro(self, sample: BaroSample) -> list[Output]:
+        # one barometer: the first source heard (an autopilot may send the same sensor
+        # twice, SCALED_PRESSURE and HIGHRES_IMU, at different times of validity)
+        source = (sample.source, sample.baro_id)
+        if self._baro_source is None:
+            self._baro_source = source
+        elif source != self._baro_source:
+            self.integrity.stats["baro_other_source"] += 1
+            return []
+        if self.baro.on_sample(sample) and self.outage.mode in OUTAGE_MODES:
+            self._baro_to_blend(sample.t_s)
+        return []
+
+    def _baro_to_blend(self, t_s: float) -> None:
+        """Through a GNSS gap, the calibrated barometer's height into the blend."""
+        blend, frame = self.navigators.primary, self.frame
+        if (
+            not self._engine_baro_in_blend
+            or frame is None
+            or not isinstance(blend, BlendNavigator)
+            or self.navigators.navigator is not blend
+            or not blend.initialised
+        ):
+            return
+        ref = self.baro.reference(t_s, 0.0)
+        state = blend.predict(blend.imu_t_s) if ref is not None else None
+        if ref is None or state is None:
+            return
+        lat, lon, _ = frame.ned_to_lla(state.pos_ned_m)
+        pos_d_m = float(frame.lla_to_ned(lat, lon, ref.alt_msl_m)[2])
+        blend.on_height(t_s, pos_d_m, ref.white_var_m2, ref.offset_var_m2)
+
+    def _baro_at(self, fix: GnssFix) -> BaroReference | None:
+        """The calibrated barometric height at the fix's time (None: none, or on the ground)."""
+        if self._on_ground():
+            return None
+        return self.baro.reference(fix.t_s, self._integrity_config.pair_max_dt_s)
+
+    def _calibrate_baro(self, fix: GnssFix, meas: GnssMeasurement) -> None:
+        """The barometer follows trusted GNSS only: fused, in normal navigation, no fault."""
+        if (
+            self.outage.mode is NavMode.NORMAL
+            and not self.integrity.fault_detected
+            and int(fix.fix_type) >= int(FixType.FIX_3D)
+        ):
+            self.baro.calibrate(fix.t_s, fix.alt_msl_m, float(meas.pos_var_ned_m2[2]))
 
     def _on_landed(self, sample: LandedStateSample) -> list[Output]:
         state = sample.landed_state
@@ -470,7 +583,9 @@ class Engine:
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{rid}_monitored"] += 1
-            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            outputs += self.integrity.on_fix(
+                fix, meas, None, references=refs, baro=self._baro_at(fix)
+            )
             return outputs
         if verdict.reinitialise:
             # rejected by the innovation alone for long enough, or after an outage beyond
@@ -482,7 +597,9 @@ class Engine:
                 self.outage.rejection_explained(rid)  # independent evidence: no reset clock
             else:
                 self.outage.rejected(fix)
-            outputs += self.integrity.on_fix(fix, meas, None, references=refs)
+            outputs += self.integrity.on_fix(
+                fix, meas, None, references=refs, baro=self._baro_at(fix)
+            )
             return outputs
         if self._bridge_cv and self.outage.mode in OUTAGE_MODES:
             # the gap was carried by constant velocity: a fix that agrees with it ends the
@@ -529,8 +646,15 @@ class Engine:
         # nor must the innovation of a fix the receiver's own evidence vouches for
         bridged = (verdict.gate and self.outage.mode in OUTAGE_MODES) or vouched
         outputs += self.integrity.on_fix(
-            fix, meas, None if bridged else update, predicted=predicted, references=refs
+            fix,
+            meas,
+            None if bridged else update,
+            predicted=predicted,
+            references=refs,
+            baro=self._baro_at(fix),
         )
+        if update.fused:
+            self._calibrate_baro(fix, meas)
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
@@ -704,7 +828,11 @@ class Engine:
     def _anchor(self, frame: LocalFrame) -> None:
         self.frame = frame
         self.navigators.shift_frame(frame, frame)
-        if self.navigators.primary is not None and self.config.inertial_reference:
+        if (
+            self.navigators.primary is not None
+            and self.config.inertial_reference
+            and not self._grade_widened
+        ):
             gravity = gravity_ned_mps2(frame.lat0_rad, frame.alt0_m)
             self.coast = InertialCoast(self._coast_config, gravity)
 

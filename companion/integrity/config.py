@@ -71,6 +71,17 @@ class IntegrityConfig:
     second receiver the pair test still holds a faulty one out)."""
     phase: PhaseConfig = field(default_factory=PhaseConfig)
     """Flight-phase rules."""
+    baro_reference: bool = True
+    """Test each receiver's height against the barometer's, calibrated against trusted
+    GNSS (the independent vertical solution one receiver lacks; snapshot, slope and
+    residual tests over ``baro_window_s``). A disagreement leaves the fault unresolved:
+    with one receiver nothing tells which of the two heights is wrong."""
+    baro_window_s: float = ranged(20.0, gt=0.0)
+    """Window of the barometer's slope and residual tests, s: the barometer's white noise
+    (0.1-0.3 m) needs about 20 s at 10 Hz to tell a 4 cm/s ramp before it reaches 1 m."""
+    baro_min_height_m: float = ranged(10.0, ge=0.0)
+    """The barometer is not tested against below this height above the field, nor in the
+    taxi phase: the ground effect (rotor or wing downwash on the static port) shifts it."""
 
     def __post_init__(self) -> None:
         check_ranges(self)

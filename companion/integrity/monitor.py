@@ -39,6 +39,7 @@ from companion.integrity.fde.detector import FaultDetector, FixCheck
 from companion.integrity.protection.alerts import AlertState
 from companion.integrity.protection.levels import ProtectionLevels
 from companion.integrity.protection.limits import AlertLimit, ApproachCategory, FlightPhase
+from companion.nav.baro import BaroReference
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.types import GnssFix, LandedState, NavSolution, Output
@@ -110,9 +111,32 @@ class IntegrityMonitor:
         update: GnssUpdate | None,
         predicted: NavState | None = None,
         references: Mapping[str, NavState] | None = None,
+        baro: BaroReference | None = None,
     ) -> list[Output]:
-        """Test one fix; returns FAULT alerts (parameters: :meth:`FaultDetector.on_fix`)."""
-        return self.fde.on_fix(fix, meas, update, predicted, references)
+        """Test one fix; returns FAULT alerts (parameters: :meth:`FaultDetector.on_fix`).
+
+        ``baro`` is used only when :meth:`baro_usable` (its series restart otherwise)."""
+        if baro is not None and not self.baro_usable(baro):
+            baro = None
+        if baro is None:
+            self.fde.pairs.restart_baro()
+        return self.fde.on_fix(fix, meas, update, predicted, references, baro)
+
+    def baro_usable(self, baro: BaroReference) -> bool:
+        """Is the barometer tested against now? ``baro_reference`` on, out of the taxi
+        phase and, with a field elevation known, at least ``baro_min_height_m`` above the
+        field (the ground effect). Counted ``baro_not_used_*`` when not."""
+        cfg = self.config
+        if not cfg.baro_reference:
+            return False
+        if self.protection.phase is FlightPhase.TAXI:
+            self.stats["baro_not_used_ground"] += 1
+            return False
+        field_m = self.protection.field_elevation_msl_m
+        if field_m is not None and baro.alt_msl_m - field_m < cfg.baro_min_height_m:
+            self.stats["baro_not_used_low"] += 1
+            return False
+        return True
 
     # ------------------------------------------------------------------ protection
 

@@ -39,6 +39,7 @@ from companion.nav.rotations import quat_to_euler
 from companion.types import (
     AttitudeSample,
     AutopilotSolution,
+    BaroSample,
     FixType,
     FloatArray,
     GnssFix,
@@ -487,12 +488,15 @@ def global_position_stream(
 
 
 def baro_stream(t_s: FloatArray, p_hpa: FloatArray, temp_c: FloatArray) -> Stream:
-    """SCALED_PRESSURE (hPa float32, cdegC): no typed sample (the decoder keeps none)."""
+    """SCALED_PRESSURE (hPa float32, cdegC) and its :class:`BaroSample` as decoded."""
     ms = np.rint(t_s * units.MS_PER_S).astype(np.int64).tolist()
     p_l = p_hpa.astype(np.float32).tolist()
     c_l = np.rint(temp_c * 100.0).astype(int).tolist()
 
     def make(i: int, t_rx: float, _last: float | None) -> tuple[Any, Sample | None, float | None]:
-        return mav.MAVLink_scaled_pressure_message(ms[i], p_l[i], 0.0, c_l[i], 0), None, None
+        msg = mav.MAVLink_scaled_pressure_message(ms[i], p_l[i], 0.0, c_l[i], 0)
+        t = ms[i] / units.MS_PER_S
+        smp = BaroSample(t, t_rx, p_l[i] * 100.0, c_l[i] / 100.0, 0, "SCALED_PRESSURE")
+        return msg, smp, t
 
     return Stream("SCALED_PRESSURE", t_s + 0.005, make)

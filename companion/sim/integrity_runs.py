@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityMonitor
 from companion.nav import earth
+from companion.nav.baro import BaroHeight
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.gnss import gnss_measurement
@@ -26,6 +27,7 @@ from companion.types import (
     Alert,
     AlertCode,
     AttitudeSample,
+    BaroSample,
     FixType,
     GnssFix,
     ImuSample,
@@ -146,6 +148,7 @@ def run_samples_ins(
     publish_rate_hz: float = 10.0,
     use_bias_estimate: bool = True,
     use_coast: bool = True,
+    use_baro: bool = False,
 ) -> InsRunResult:
     """Drive the GNSS/INS blend, the inertial coast and the monitor with a flight's samples.
 
@@ -155,7 +158,9 @@ def run_samples_ins(
     time (and its accelerometer-bias estimate and covariance when
     ``use_bias_estimate``) when due, but not while the monitor reports a fault; a
     solution is published at ``publish_rate_hz`` on the fix clock. ``use_coast``
-    False gives the same run without references (the baseline).
+    False gives the same run without references (the baseline). ``use_baro``: the
+    flight's barometer samples (:class:`BaroSample`) calibrated against the fused fixes
+    while no fault is reported and given to the monitor at every fix, as the engine does.
     """
     frame: LocalFrame | None = None
     nav: BlendNavigator | None = None
@@ -166,10 +171,15 @@ def run_samples_ins(
     excluded: dict[int, float] = {}
     tick = -1
     last_t: dict[int, float] = {}
+    baro = BaroHeight(stats=monitor.stats)
     monitor.reset()
     for sample in samples:
         if isinstance(sample, LandedStateSample):
             landed = sample.landed_state
+            continue
+        if isinstance(sample, BaroSample):
+            if use_baro:
+                baro.on_sample(sample)
             continue
         if frame is None:
             if isinstance(sample, GnssFix) and int(sample.fix_type) >= int(FixType.FIX_3D):
@@ -210,7 +220,12 @@ def run_samples_ins(
         meas = gnss_measurement(sample, frame)
         update = _offer(nav, monitor, meas, last_t)
         refs = coast.references(sample.t_s) if use_coast else None
-        outs = monitor.on_fix(sample, meas, update, references=refs)
+        ref_baro = None
+        if use_baro and landed is not LandedState.ON_GROUND:
+            ref_baro = baro.reference(sample.t_s, monitor.config.pair_max_dt_s)
+        outs = monitor.on_fix(sample, meas, update, references=refs, baro=ref_baro)
+        if use_baro and update is not None and update.fused and not monitor.fault_detected:
+            baro.calibrate(sample.t_s, sample.alt_msl_m, float(meas.pos_var_ned_m2[2]))
         for r in list(last_t):
             if monitor.exclude(r) and r not in excluded:
                 excluded[r] = sample.t_s

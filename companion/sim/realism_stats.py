@@ -2,7 +2,7 @@
 
 The same function runs on a real .tlog and on a simulated flight's .tlog: both
 are decoded by the project's own decoder (:class:`companion.mavlink.decode.Decoder`);
-SCALED_PRESSURE, which the decoder does not turn into samples, is read from the
+SCALED_PRESSURE (the decoder's barometer samples keep no raw hPa) is read from the
 raw messages. Every statistic is None where the log does not show it (no rest
 period, no GNSS, no barometer).
 

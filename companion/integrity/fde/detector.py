@@ -32,8 +32,9 @@ import numpy as np
 from companion.integrity.config import IntegrityConfig
 from companion.integrity.fde.attribution import Attribution
 from companion.integrity.fde.fix_tests import FixTests, valid_measurement
-from companion.integrity.fde.pairs import REF_PREFIX, PairSeparations
+from companion.integrity.fde.pairs import BARO_REF, REF_PREFIX, PairSeparations
 from companion.integrity.fde.receivers import ReceiverState, is_excluded
+from companion.nav.baro import BaroReference
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.types import Alert, AlertCode, GnssFix, Output, Severity
@@ -165,6 +166,7 @@ class FaultDetector:
         update: GnssUpdate | None,
         predicted: NavState | None = None,
         references: Mapping[str, NavState] | None = None,
+        baro: BaroReference | None = None,
     ) -> list[Output]:
         """Test one fix; returns FAULT alerts (at the onset of a fault, not per fix).
 
@@ -176,6 +178,9 @@ class FaultDetector:
             when it was not offered (e.g. the receiver is excluded).
         predicted : the position-potential filter's prediction at the fix time, or None.
         references : independent solutions at (about) the fix time, by name.
+        baro : the calibrated barometric height at the fix time (a vertical-only
+            independent solution), or None. A disagreement with it leaves the fault
+            unresolved (nothing tells which height is wrong).
         """
         t = meas.t_s
         rid = meas.receiver_id
@@ -196,7 +201,7 @@ class FaultDetector:
 
         if rx.last_meas is not None and rx.last_meas.fix_type != meas.fix_type:
             self.pairs.restart_receiver(rid)
-        sep_results = self.pairs.separations(meas, self._receivers, references)
+        sep_results = self.pairs.separations(meas, self._receivers, references, baro, fix.alt_msl_m)
         innov_failed, fix_reasons = self._fix_tests.run(meas, update, predicted)
         if update is not None and update.dof > 0 and math.isfinite(update.nis):
             rx.last_nis = update.nis / update.dof
@@ -222,6 +227,21 @@ class FaultDetector:
             reasons += [f"{key[0]}-{key[1]} {r}" for r in res.reasons]
             self._fault_sep_h_m = max(self._fault_sep_h_m, float(np.hypot(*res.sep_ned_m[:2])))
             self._fault_sep_v_m = max(self._fault_sep_v_m, abs(float(res.sep_ned_m[2])))
+            if key[1] == BARO_REF:
+                # the receiver's height against the barometer's (calibrated against the
+                # fused receiver while no fault is detected)
+                self.stats["baro_disagrees"] += 1
+                if rid in culprits or t < rx.excluded_until_s:
+                    self.stats["baro_vs_excluded"] += 1  # already found faulty
+                elif update is None and self._other_receivers(rid, t):
+                    # not fused, another receiver is: the receiver pair's own tests judge
+                    self.stats["baro_vs_unfused"] += 1
+                else:
+                    # two heights, and nothing to say which is wrong
+                    unresolved = True
+                    if attribution.episode_start_s is None:
+                        attribution.episode_start_s = t
+                continue
             if key[1].startswith(REF_PREFIX):
                 if rid in culprits or t < rx.excluded_until_s:
                     culprits.add(rid)  # already found faulty: it stays excluded

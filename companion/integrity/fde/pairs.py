@@ -31,6 +31,8 @@ from companion.integrity.coast import CoastState
 from companion.integrity.config import IntegrityConfig
 from companion.integrity.fde.receivers import ReceiverState
 from companion.integrity.fde.separation import ReferenceDrift, SeparationResult, SeparationTracker
+from companion.integrity.fde.vertical import VerticalSeparation
+from companion.nav.baro import BaroReference
 from companion.nav.navigator import GnssMeasurement, NavState
 from companion.types import FloatArray
 
@@ -38,6 +40,8 @@ log = logging.getLogger(__name__)
 
 PairKey = tuple[str, str]
 REF_PREFIX = "ref:"
+BARO_REF = REF_PREFIX + "baro"
+"""The barometer's name in a pair key (a vertical-only reference)."""
 """Prefix of a reference solution's name in a pair key (receivers are ``rx<id>``)."""
 _FLOAT_MAX = float(np.finfo(float).max)
 """What ``np.nan_to_num`` puts for an infinity (with its sign)."""
@@ -64,6 +68,8 @@ class PairSeparations:
         self._used: dict[PairKey, dict[int, float]] = {}
         """Per receiver pair, the time of each receiver's fix last paired (each once)."""
         self.ref_anchor_t_s: dict[PairKey, float] = {}
+        self._vertical: dict[PairKey, VerticalSeparation] = {}
+        self._baro_epoch: dict[PairKey, int] = {}
 
     def restart_receiver(self, receiver_id: int) -> None:
         """Restart every separation series of a receiver (its fix type changed).
@@ -76,27 +82,82 @@ class PairSeparations:
         for key, tracker in self._trackers.items():
             if tag in key:
                 tracker.reset()
+        for key, vertical in self._vertical.items():
+            if tag in key:
+                vertical.reset()
         self.stats["series_restarted_fix_type"] += 1
 
     def rotate(self, rot: FloatArray) -> None:
         """Re-express every series with a (3, 3) frame rotation (the engine re-anchored)."""
         for tracker in self._trackers.values():
             tracker.rotate(rot)
+        # heights do not rotate: the barometer's series stand
 
     def separations(
         self,
         meas: GnssMeasurement,
         receivers: Mapping[int, ReceiverState],
         references: Mapping[str, NavState] | None,
+        baro: BaroReference | None = None,
+        alt_msl_m: float | None = None,
     ) -> dict[PairKey, SeparationResult]:
         """This fix's separations from the other receivers' latest fixes, then from the
-        references, by pair key (only the pairs tested at this epoch)."""
+        references, then (its height ``alt_msl_m``) from the barometer, by pair key (only
+        the pairs tested at this epoch)."""
         results: dict[PairKey, SeparationResult] = {}
         if len(receivers) > 1:
             self._receiver_separations(meas, receivers, results)
         if references:
             self._reference_separations(meas, references, results)
+        if baro is not None and alt_msl_m is not None:
+            self._baro_separation(meas, baro, alt_msl_m, results)
         return results
+
+    def restart_baro(self) -> None:
+        """Restart every barometer series (not tested for a while: ground effect, no baro)."""
+        for vertical in self._vertical.values():
+            vertical.reset()
+
+    def _baro_separation(
+        self,
+        meas: GnssMeasurement,
+        baro: BaroReference,
+        alt_msl_m: float,
+        results: dict[PairKey, SeparationResult],
+    ) -> None:
+        """The receiver's height less the calibrated barometer's (vertical only)."""
+        key = (f"rx{meas.receiver_id}", BARO_REF)
+        vertical = self._vertical.get(key)
+        cfg = self.config
+        if vertical is None:
+            vertical = self._vertical[key] = VerticalSeparation(
+                cfg.baro_window_s,
+                cfg.min_window_points,
+                cfg.false_alarm_prob,
+                cfg.slope_false_alarm_prob,
+                cfg.residual_false_alarm_prob,
+            )
+        if self._baro_epoch.get(key) != baro.epoch:
+            self._baro_epoch[key] = baro.epoch  # a new calibration: a new series
+            vertical.reset()
+        try:
+            res = vertical.update(
+                meas.t_s,
+                alt_msl_m - baro.alt_msl_m,
+                float(meas.pos_var_ned_m2[2]),
+                baro.white_var_m2,
+                baro.offset_var_m2,
+                baro.drift_var_m2ps2,
+            )
+        except ValueError as exc:
+            self.stats["bad_separation"] += 1
+            log.warning("barometer separation at t=%.2f s skipped: %s", meas.t_s, exc)
+            return
+        self.latest[key] = res
+        results[key] = res
+        for reason in ("slope", "residual", "separation"):
+            if any(r.startswith(reason) for r in res.reasons):
+                self.stats[f"baro_{reason}"] += 1
 
     def _tracker(self, key: PairKey) -> SeparationTracker:
         tracker = self._trackers.get(key)

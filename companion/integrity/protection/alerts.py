@@ -79,6 +79,11 @@ class AlertState:
         self.limit: AlertLimit | None = None
         self._report_tick = -1
 
+    @property
+    def field_elevation_msl_m(self) -> float | None:
+        """The field elevation (configured or learned on the ground), m MSL; None unknown."""
+        return self._phase_classifier.field_elevation_msl_m
+
     def update(
         self,
         solution: NavSolution,

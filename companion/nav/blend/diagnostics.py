@@ -28,6 +28,8 @@ class BlendDiagnostics:
     fused: int = 0
     """Fixes fused."""
     gated: int = 0
+    heights_fused: int = 0
+    """Independent heights (the barometer through a GNSS gap) fused."""
     """Fixes refused by the innovation gate."""
     rejected: dict[str, int] = field(default_factory=dict)
     """Inputs refused, by reason."""
