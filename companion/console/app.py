@@ -38,6 +38,9 @@ from companion.mavlink.framing import FrameParser
 from companion.mavlink.link import Link, LinkError, UdpLink, open_link
 
 REFRESH_S = 0.5
+STALE_CHECK_S = 0.1
+"""How often a link going quiet (or coming back) is looked for: STALE shows within
+``STALE_S`` and this, not a whole refresh later."""
 ANTENNA_PERIOD_S = 0.1
 EARTH_RADIUS_M = 6_371_000.0
 """For the track plot's metres (a picture, not navigation)."""
@@ -201,6 +204,7 @@ class ConsoleApp(App[int]):
         self.sender = Sender()
         self.parser = FrameParser()
         self.status = "no command sent yet"
+        self._stale_shown = (True, True)
         self._alerts_shown = 0
 
     # ----------------------------------------------------------------- layout
@@ -245,6 +249,7 @@ class ConsoleApp(App[int]):
                 self.set_interval(ANTENNA_PERIOD_S, self._feed_antenna)
         self.refresh_panels()
         self.set_interval(REFRESH_S, self.refresh_panels)
+        self.set_interval(STALE_CHECK_S, self._refresh_on_stale_change)
 
     async def on_unmount(self) -> None:
         if self.link is not None:
@@ -330,9 +335,16 @@ class ConsoleApp(App[int]):
         self.push_screen(ParamScreen())
 
     # ---------------------------------------------------------------- drawing
+    def _refresh_on_stale_change(self) -> None:
+        now = self.clock()
+        stale = (self.model.service_stale(now), self.model.autopilot_stale(now))
+        if stale != self._stale_shown:
+            self.refresh_panels()
+
     def refresh_panels(self, force_alerts: bool = False) -> None:
         now = self.clock()
         m = self.model
+        self._stale_shown = (m.service_stale(now), m.autopilot_stale(now))
         s = m.snapshot(now)
         link, nav, integ, hdg = s["link"], s["navigation"], s["integrity"], s["heading"]
         self.query_one("#link", Panel).set_class(link["service_stale"], "stale")

@@ -306,6 +306,10 @@ class ConsoleModel:
         age = self.service_age(now_s)
         return age is None or age >= STALE_S
 
+    def autopilot_stale(self, now_s: float) -> bool:
+        age = self.autopilot_age(now_s)
+        return age is None or age >= STALE_S
+
     def mode(self, now_s: float) -> NavMode:
         """normal / degraded / bridging / lost, as published (WAITING before the first fix)."""
         if self.lat_deg is None:
@@ -375,7 +379,7 @@ class ConsoleModel:
                 "service_age_s": age_s,
                 "service_stale": self.service_stale(now_s),
                 "autopilot_age_s": ap_age_s,
-                "autopilot_stale": ap_age_s is None or ap_age_s >= STALE_S,
+                "autopilot_stale": self.autopilot_stale(now_s),
                 "messages": self.messages,
                 "heartbeats": self.heartbeats,
             },
