@@ -63,7 +63,12 @@ def test_without_imu_the_potential_filter_bridges_a_gap():
         pred = pot.predict(sol.t_s)
         published = engine.frame.lla_to_ned(sol.lat_rad, sol.lon_rad, sol.alt_msl_m)
         np.testing.assert_allclose(published, pred.pos_ned_m, atol=2e-3)
-        np.testing.assert_allclose(sol.pos_cov_ned_m2, pred.cov_ned_m2)
+        # its covariance, or the pass-through's where that is larger (the filter's knows
+        # nothing of a manoeuvre begun in the gap)
+        cv = engine.navigators.fallback.predict(sol.t_s)
+        assert cv is not None
+        larger = max(pred.cov_ned_m2, cv.pos_cov_ned_m2, key=lambda c: np.trace(c[:2, :2]))
+        np.testing.assert_allclose(sol.pos_cov_ned_m2, larger)
     # on a straight line constant velocity is the exact model: the field must not pull
     # the particle off it (a few cm of fix noise over 5 s)
     err = np.array([error_m(s, line) for s in gap])

@@ -27,6 +27,7 @@ import logging
 from collections import deque
 from dataclasses import replace
 
+import numpy as np
 from scipy.stats import chi2
 
 from companion.engine.config import EngineConfig
@@ -119,7 +120,16 @@ class PotentialBridge:
             return state
         pred = pot.predict(t_s)
         if no_imu:
-            return potential_state(pred, state.yaw_rad)
+            # the filter's covariance knows nothing of a manoeuvre begun in the gap; the
+            # pass-through's grows with the manoeuvres of the flight so far: the larger
+            bridged = potential_state(pred, state.yaw_rad)
+            if np.trace(state.pos_cov_ned_m2[:2, :2]) > np.trace(bridged.pos_cov_ned_m2[:2, :2]):
+                bridged = replace(
+                    bridged,
+                    pos_cov_ned_m2=state.pos_cov_ned_m2,
+                    vel_cov_ned_m2ps2=state.vel_cov_ned_m2ps2,
+                )
+            return bridged
         if self._disagrees:
             return state  # once they disagreed in this gap, the INS alone to its end
         pos, cov, chi2_ = combine_with_ins(

@@ -6,6 +6,11 @@ acceleration noise of spectral density ``q`` [m^2/s^3] per axis:
 
     P_pos(dt) = P_pos + 2 dt P_pv + dt^2 P_vel + q dt^3 / 3
 
+Horizontally ``q`` is at least Singer's ``2 sigma_m^2 tau`` with ``sigma_m^2`` the
+mean square of the flight's own horizontal accelerations (velocity changes over at
+least :data:`ACCEL_BASELINE_S`, remembered for :data:`ACCEL_MEMORY_S`): a plane that
+turns is not carried with a hovering copter's covariance (Singer 1970, eq. 9).
+
 Its vertical velocity, which GPS_RAW_INT does not carry, is the smoothed
 difference of consecutive fix heights. It is the baseline every better
 navigator is measured against, and what runs when nothing better is
@@ -15,6 +20,8 @@ References
 ----------
 Bar-Shalom, Li, Kirubarajan, Estimation with Applications to Tracking and
 Navigation (2001), section 6.2 (continuous white-noise acceleration model).
+Singer, "Estimating optimal tracking filter performance for manned maneuvering
+targets", IEEE Trans. AES-6 (1970).
 """
 
 from __future__ import annotations
@@ -31,6 +38,14 @@ from companion.ranges import check_ranges, ranged
 from companion.types import AttitudeSample, FloatArray, ImuSample
 
 _EYE3 = np.eye(3)
+MANOEUVRE_TIME_S = 10.0
+"""Singer's manoeuvre time constant tau (his figure for a turn)."""
+ACCEL_BASELINE_S = 1.0
+"""Velocities this far apart at least give an acceleration (velocity noise stays small)."""
+ACCEL_MEMORY_S = 120.0
+"""Time constant of the mean square of the flight's horizontal accelerations."""
+MAX_ACCEL_GAP_S = 5.0
+"""Velocities further apart than this (a gap) give no acceleration."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +71,9 @@ class PassthroughNavigator:
     def __init__(self, config: PassthroughConfig | None = None) -> None:
         self.config = config or PassthroughConfig()
         self._gate = float(chi2.ppf(1.0 - self.config.gate_false_alarm_prob, 3))
+        self._accel_ms_m2ps4 = 0.0
+        """Mean square of the horizontal acceleration per axis: the manoeuvres seen in
+        this flight (kept through a reset of the state: they are the vehicle's)."""
         self.reset()
 
     def reset(self) -> None:
@@ -67,6 +85,15 @@ class PassthroughNavigator:
         self._p_vel = _EYE3.copy()
         self._diagonal = True
         """Both covariances are diagonal (as every fix leaves them; a frame shift rotates them)."""
+        self._accel_ref: tuple[float, float, float, float] | None = None
+        """(t_s, north, east velocity, their variance sum) the next acceleration is
+        measured from."""
+
+    @property
+    def horizontal_psd_m2ps3(self) -> float:
+        """Horizontal white acceleration density: the configured ``q``, or Singer's
+        ``2 sigma_m^2 tau`` from the manoeuvres seen, whichever is larger."""
+        return max(self.config.accel_psd_m2ps3, 2.0 * self._accel_ms_m2ps4 * MANOEUVRE_TIME_S)
 
     @property
     def initialised(self) -> bool:
@@ -93,12 +120,15 @@ class PassthroughNavigator:
     def _grown_cov(self, dt: float) -> tuple[FloatArray, FloatArray]:
         """Position and velocity covariances (3, 3) each, ``dt`` s after the last fix."""
         q = self.config.accel_psd_m2ps3
+        q_h = self.horizontal_psd_m2ps3
         p_pos = self._p_vel * (dt * dt)
         p_pos += self._p_pos
         p_vel = self._p_vel.copy()
-        # the white acceleration noise q I, added to the diagonals (views)
-        p_pos.reshape(-1)[::4] += q * dt**3 / 3.0
-        p_vel.reshape(-1)[::4] += q * dt
+        # the white acceleration noise diag(q_h, q_h, q), added to the diagonals
+        dt3 = dt**3 / 3.0
+        for axis, qa in ((0, q_h), (1, q_h), (2, q)):
+            p_pos[axis, axis] += qa * dt3
+            p_vel[axis, axis] += qa * dt
         return p_pos, p_vel
 
     def on_gnss(self, meas: GnssMeasurement, *, gate: bool = True) -> GnssUpdate:
@@ -146,6 +176,8 @@ class PassthroughNavigator:
                     )
         else:
             vel = [v if isfinite(v) else 0.0 for v in vel]
+        if isfinite(float(meas.vel_ned_mps[0])) and isfinite(float(meas.vel_ned_mps[1])):
+            self._learn_accel(meas.t_s, vel[0], vel[1], vel_var[0] + vel_var[1])
         self._t_s = meas.t_s
         self._pos = np.array(meas.pos_ned_m, dtype=float)
         self._vel = np.array(vel)
@@ -153,8 +185,24 @@ class PassthroughNavigator:
         self._p_vel = np.diag(vel_var)
         self._diagonal = True
 
+    def _learn_accel(self, t_s: float, vn_mps: float, ve_mps: float, var_m2ps2: float) -> None:
+        """The mean square of the horizontal acceleration, from velocities at least
+        :data:`ACCEL_BASELINE_S` apart (never across a gap or backwards in time), less
+        what the two velocities' noise (``var_m2ps2``: north + east variance) explains."""
+        ref = self._accel_ref
+        if ref is not None and ACCEL_BASELINE_S > t_s - ref[0] >= 0.0:
+            return
+        if ref is not None and t_s - ref[0] <= MAX_ACCEL_GAP_S:
+            dt = t_s - ref[0]
+            dv2 = (vn_mps - ref[1]) ** 2 + (ve_mps - ref[2]) ** 2 - var_m2ps2 - ref[3]
+            a2 = max(dv2, 0.0) / (2.0 * dt * dt)
+            w = 1.0 - math.exp(-dt / ACCEL_MEMORY_S)
+            self._accel_ms_m2ps4 += w * (a2 - self._accel_ms_m2ps4)
+        self._accel_ref = (t_s, vn_mps, ve_mps, var_m2ps2)
+
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express position, velocity and covariances in ``new``."""
+        self._accel_ref = None
         if self._t_s is None:
             return
         rot = rotation_between_frames(old, new)

@@ -106,3 +106,47 @@ def test_config_validation_names_the_field_and_range() -> None:
         PassthroughConfig(vertical_velocity_gain=0.0)
     with pytest.raises(ValueError, match="accel_psd_m2ps3"):
         PassthroughConfig(accel_psd_m2ps3=math.nan)
+
+
+def circuit(t_s: float, speed_mps: float = 25.0, radius_m: float = 200.0):
+    """A plane flying straight for 60 s, then circling (3.1 m/s^2), positions and velocity."""
+    if t_s < 60.0:
+        return np.array([speed_mps * t_s, 0.0, 0.0]), np.array([speed_mps, 0.0])
+    w = speed_mps / radius_m
+    a = w * (t_s - 60.0)
+    pos = np.array([speed_mps * 60.0 + radius_m * math.sin(a), radius_m * (1 - math.cos(a)), 0.0])
+    return pos, np.array([speed_mps * math.cos(a), speed_mps * math.sin(a)])
+
+
+def test_covariance_through_a_gap_grows_with_the_manoeuvres_seen():
+    # a plane that has been circling, then loses GNSS for 20 s while still circling: the
+    # constant-velocity prediction is hundreds of metres off; the covariance learnt from
+    # the flight's own accelerations covers it (95 %), the configured q alone does not
+    rng = np.random.default_rng(7)
+    nav = PassthroughNavigator()
+    for k in range(5 * 120):
+        t = 0.2 * k
+        pos, vel = circuit(t)
+        nav.on_gnss(meas(t, pos + rng.normal(0, 0.5, 3), vel + rng.normal(0, 0.1, 2)))
+    assert nav.horizontal_psd_m2ps3 > 10 * nav.config.accel_psd_m2ps3
+    t_last = 0.2 * (5 * 120 - 1)
+    bound95 = math.sqrt(chi2.ppf(0.95, 2))
+    for gap_s in (5.0, 10.0, 20.0):
+        pred = nav.predict(t_last + gap_s)
+        err = np.linalg.norm(pred.pos_ned_m[:2] - circuit(t_last + gap_s)[0][:2])
+        sigma_h = math.sqrt(np.trace(pred.pos_cov_ned_m2[:2, :2]) / 2)
+        configured = math.sqrt(nav.config.accel_psd_m2ps3 * gap_s**3 / 3)
+        assert err > 2 * bound95 * configured  # the configured q alone: confidently wrong
+        assert err < bound95 * sigma_h, (gap_s, err, sigma_h)
+
+
+def test_velocity_noise_alone_is_no_manoeuvre():
+    rng = np.random.default_rng(3)
+    nav = PassthroughNavigator()
+    vel = np.array([20.0, -5.0, 0.0])
+    for k in range(5 * 120):
+        t = 0.2 * k
+        nav.on_gnss(meas(t, vel * t + rng.normal(0, 0.5, 3), vel[:2] + rng.normal(0, 0.1, 2)))
+    # noise of 0.1 m/s on each velocity: what is left after its variance is removed is
+    # the flooring's small bias, within 1.5x the configured density
+    assert nav.horizontal_psd_m2ps3 < 1.5 * nav.config.accel_psd_m2ps3
