@@ -527,3 +527,19 @@ def test_unreadable_tlog_and_bad_sidecar_raise(tmp_path: Path, truth: Truth) -> 
     empty_truth.write_text(",".join(TRUTH_COLUMNS) + "\n")
     with pytest.raises(EvaluationError, match="fewer than 2"):
         evaluate(good, empty_truth)
+
+
+def test_an_autopilot_reboot_is_undone_by_the_tlog_time_of_its_silence():
+    # the simulator's truth stays on the first boot's clock: published times after a
+    # reboot continue the first boot's by the silence's tlog time, not from zero
+    from companion.evaluate.published import _BootClock
+
+    boot = _BootClock()
+    epoch = 1.7e9
+    times = [boot.continuous(t, epoch + t) for t in (10.0, 10.1, 10.2)]
+    # 3 s of silence, then the new boot's clock starts at 4.0 s
+    after = [boot.continuous(t, epoch + 10.2 + 3.0 + (t - 4.0)) for t in (4.0, 4.1)]
+    assert times == [10.0, 10.1, 10.2]
+    assert after == pytest.approx([13.2, 13.3])
+    # jitter of the clock (a few ms back) is no reboot
+    assert boot.continuous(4.095, epoch + 13.31) == pytest.approx(13.295)

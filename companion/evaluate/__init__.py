@@ -19,8 +19,9 @@ Time alignment
     A published solution is compared with the truth at ``t_s = time_boot_ms / 1000``
     (autopilot time of validity), never at its tlog time. Truth is interpolated linearly in
     time (longitude unwrapped, yaw unwrapped). Solutions outside the truth's time span are
-    counted and left out. One boot clock is assumed: an autopilot reboot inside the log
-    (``time_boot_ms`` restarting) is not undone here.
+    counted and left out. An autopilot reboot inside the log (``time_boot_ms`` going back
+    by more than a second) is undone: the new boot's times continue the first boot's by
+    the tlog time of the silence, as the simulator's truth is on the first boot's clock.
 Error
     ``published - truth`` expressed in the local NED frame of the truth point itself
     (pymap3d), so long routes do not mix vertical into horizontal. Horizontal error is the

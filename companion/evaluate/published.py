@@ -3,7 +3,9 @@ named values over the flight, read back from the output tlog.
 
 Each message is read with :mod:`companion.mavlink.readback`. Times:
 
-* a solution is at ``GLOBAL_POSITION_INT.time_boot_ms / 1000`` (autopilot time of validity);
+* a solution is at ``GLOBAL_POSITION_INT.time_boot_ms / 1000`` (autopilot time of validity),
+  made continuous across an autopilot reboot by the tlog time of the silence
+  (:class:`_BootClock`), as the truth is on the first boot's clock;
 * STATUSTEXT and GPS_INPUT carry no time: an alert's (or accuracy's) autopilot time is
   its tlog time minus the offset ``tlog_time - time_boot_ms/1000`` of the nearest
   *preceding* published GLOBAL_POSITION_INT in the log (the first one for records before
@@ -37,6 +39,8 @@ from companion.types import FloatArray, NamedValue
 
 ACCURACY_MAX_AGE_S = 1.0
 """A published accuracy older than this no longer applies to a solution, s."""
+REBOOT_STEP_S = 1.0
+"""A published time going back by more than this is an autopilot reboot."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -64,6 +68,24 @@ def _nan_if_none(x: float | None) -> float:
     return math.nan if x is None else x
 
 
+class _BootClock:
+    """The autopilot's time made continuous across its reboots: when the published time
+    goes back by more than :data:`REBOOT_STEP_S`, the new boot's times are moved on by
+    the tlog time elapsed since the last publication before it (the truth stays on the
+    first boot's clock)."""
+
+    def __init__(self) -> None:
+        self.offset_s = 0.0
+        self._last: tuple[float, float] | None = None  # (continuous t_s, t_rx)
+
+    def continuous(self, t_s: float, t_rx: float) -> float:
+        if self._last is not None and t_s + self.offset_s < self._last[0] - REBOOT_STEP_S:
+            self.offset_s = self._last[0] + max(t_rx - self._last[1], 0.0) - t_s
+        t_c = t_s + self.offset_s
+        self._last = (t_c, t_rx)
+        return t_c
+
+
 def extract_publications(records: Sequence[tuple[float, Any]], path: Path) -> Publications:
     """Pull the service's publications (component 191) out of the tlog records."""
     gpi_rows: list[tuple[float, ...]] = []
@@ -73,12 +95,13 @@ def extract_publications(records: Sequence[tuple[float, Any]], path: Path) -> Pu
     texts: list[tuple[int, float, str, int]] = []
     named: dict[str, list[tuple[float, float]]] = {}
     joiner = TextJoiner()
+    boot = _BootClock()
     for k, (t_rx, msg) in enumerate(records):
         if not from_service(msg):
             continue
         item = read_message(msg)
         if isinstance(item, PublishedPosition):
-            t_s = item.t_s
+            t_s = boot.continuous(item.t_s, t_rx)
             vn, ve, vd = item.vel_ned_mps
             yaw = _nan_if_none(item.yaw_rad)
             gpi_rows.append((t_s, item.lat_rad, item.lon_rad, item.alt_msl_m, vn, ve, vd, yaw))
@@ -92,7 +115,7 @@ def extract_publications(records: Sequence[tuple[float, Any]], path: Path) -> Pu
                 (k0, t0), text, sev = done
                 texts.append((k0, t0, text, sev))
         elif isinstance(item, NamedValue):
-            named.setdefault(item.name, []).append((item.t_s, item.value))
+            named.setdefault(item.name, []).append((boot.continuous(item.t_s, t_rx), item.value))
     for (k0, t0), text, sev in joiner.unfinished():
         texts.append((k0, t0, text, sev))
     if not gpi_rows:
