@@ -59,7 +59,7 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
     print(
         "  GPS_RAW_INT time_usec trails the truth by "
         + ("-" if lag is None else f"{lag * 1000:.0f} ms")
-        + " (measured; GPS1_DELAY_MS should be that)"
+        + " (measured: what GPS1_DELAY_MS should be)"
     )
     print(
         f"  the autopilot published no position for {outage['autopilot_max_gap_s']:.1f} s "
@@ -86,9 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--after-s", type=float, default=60.0)
     p.add_argument(
         "--params",
-        default='{"GPS1_DELAY_MS": 83}',
-        help="autopilot parameters (JSON); default: the GPS lag set to the 83 ms by which "
-        "SITL's GPS_RAW_INT time_usec trails the truth (printed as measured per flight)",
+        default='{"GPS1_DELAY_MS": 100}',
+        help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms "
+        "(SIM_GPS1_LAG_MS; the lag the autopilot's stamps really carry is printed per flight)",
     )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
     p.add_argument(
