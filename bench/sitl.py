@@ -55,6 +55,12 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
     ]
     for label, sec in rows:
         print(f"  {label:30s} {_fmt(sec['service']):>22s} {_fmt(sec['autopilot']):>22s}")
+    lag = flight.get("gps_lag_s")
+    print(
+        "  GPS_RAW_INT time_usec trails the truth by "
+        + ("-" if lag is None else f"{lag * 1000:.0f} ms")
+        + " (measured: what GPS1_DELAY_MS should be)"
+    )
     print(
         f"  the autopilot published no position for {outage['autopilot_max_gap_s']:.1f} s "
         "of the outage (longest gap)"
@@ -81,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--params",
         default='{"GPS1_DELAY_MS": 100}',
-        help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms",
+        help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms "
+        "(SIM_GPS1_LAG_MS; the lag the autopilot's stamps really carry is printed per flight)",
     )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
     p.add_argument(

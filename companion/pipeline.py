@@ -659,9 +659,13 @@ class Pipeline:
             if not wanted:
                 continue
             got, best = max((self.rates.measured_hz(n, t_s), n) for n in names)
-            want = min(wanted)
+            want, what = min(wanted), "requested"
+            receiver_hz = self.autopilot_params.gnss_rate_hz
+            if need == "GNSS" and receiver_hz is not None and receiver_hz < want:
+                # distinct fixes (repeats are dropped) come no faster than the receiver's rate
+                want, what = receiver_hz, "the receiver's rate"
             if got < self.rates.min_fraction * want:
-                short[need] = f"{need} at {got:.1f} Hz (best: {best}), requested {want:g} Hz"
+                short[need] = f"{need} at {got:.1f} Hz (best: {best}), {what} {want:g} Hz"
         for need in sorted(set(short) - self._short_streams):
             self.stats.rate_warnings += 1
             log.warning("stream rate: %s", short[need])

@@ -4,8 +4,10 @@ ArduPilot: which GPS instance takes MAVLink GPS_INPUT (``GPS1_TYPE``/``GPS2_TYPE
 ``GPS_TYPE`` before 4.6, equal to 14, MAV: AP_GPS_MAV.cpp takes a GPS_INPUT only when
 its ``gps_id`` is that instance), each instance's lag (``GPS1_DELAY_MS``/
 ``GPS2_DELAY_MS``, ``GPS_DELAY_MS``/``GPS_DELAY_MS2`` before 4.6: the time from a fix's
-validity to its arrival; 0 means the driver's default, not known here) and the loop
-rate (``SCHED_LOOP_RATE``: no stream goes faster).
+validity to its arrival; 0 means the driver's default, not known here), the loop
+rate (``SCHED_LOOP_RATE``: no stream goes faster) and the first receiver's fix period
+(``GPS1_RATE_MS``, ``GPS_RATE_MS`` before 4.6: no more distinct fixes than that, however
+often GPS_RAW_INT is sent).
 
 :class:`AutopilotParams` asks for each name by PARAM_REQUEST_READ (again every
 ``retry_s`` of autopilot time, ``max_tries`` times: a name the firmware does not have
@@ -33,10 +35,13 @@ ARDUPILOT_NAMES: tuple[str, ...] = (
     "GPS_DELAY_MS",
     "GPS_DELAY_MS2",
     "SCHED_LOOP_RATE",
+    "GPS1_RATE_MS",
+    "GPS_RATE_MS",
 )
 _TYPE_NAMES = (("GPS1_TYPE", "GPS_TYPE"), ("GPS2_TYPE",))
 """Per GPS instance, the names of its type (new name first)."""
 _DELAY_NAMES = (("GPS1_DELAY_MS", "GPS_DELAY_MS"), ("GPS2_DELAY_MS", "GPS_DELAY_MS2"))
+_RATE_NAMES = ("GPS1_RATE_MS", "GPS_RATE_MS")
 
 
 class AutopilotParams:
@@ -131,3 +136,9 @@ class AutopilotParams:
     def loop_rate_hz(self) -> float | None:
         rate = self.values.get("SCHED_LOOP_RATE")
         return rate if rate is not None and rate > 0 else None
+
+    @property
+    def gnss_rate_hz(self) -> float | None:
+        """The first GPS's fix rate (``GPS1_RATE_MS``), Hz; None when unknown."""
+        ms = self._first(_RATE_NAMES)
+        return 1000.0 / ms if ms is not None and ms > 0 else None

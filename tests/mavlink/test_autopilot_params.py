@@ -4,8 +4,10 @@ as a receiver), the receivers' lags, and stream requests it can honour."""
 
 from __future__ import annotations
 
+import logging
 from typing import Any
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.config import Config, StreamsConfig
@@ -132,3 +134,33 @@ def test_streams_requested_on_a_heartbeat_before_any_time() -> None:
         m.get_type() == "COMMAND_LONG" and m.command == MAV_CMD_SET_MESSAGE_INTERVAL for m in out
     )
     assert _msgs(p.on_message(AP.parsed(heartbeat(3)), 1.0)) == []  # once
+
+
+def _fly_repeated_fixes(p: Pipeline, seconds: float) -> None:
+    """ArduPlane's 10 Hz GPS_RAW_INT of a 5 Hz receiver: each fix sent twice."""
+    for k in range(int(seconds * 10)):
+        t_ms = 10_000 + 100 * k
+        p.on_message(AP.parsed(attitude(t_ms)), 0.0)
+        fix_ms = t_ms - t_ms % 200
+        p.on_message(AP.parsed(gps_raw(fix_ms * 1000)), 0.0)
+
+
+def test_gnss_rate_checked_against_the_receivers_rate(caplog: pytest.LogCaptureFixture) -> None:
+    """Repeats are no fixes: 5 distinct fixes a second meet a 5 Hz receiver
+    (GPS1_RATE_MS 200) asked for at 10 Hz, and fall short when its rate is unknown."""
+
+    def gnss_warnings() -> list[str]:
+        return [r.getMessage() for r in caplog.records if "stream rate: GNSS" in r.getMessage()]
+
+    p, _ = _started()
+    p.on_message(_param("GPS1_RATE_MS", 200.0), 0.1)
+    with caplog.at_level(logging.WARNING, logger="companion.pipeline"):
+        _fly_repeated_fixes(p, 30.0)
+    assert p.decoder.rejections["repeated_fix"] > 100
+    assert gnss_warnings() == []
+    caplog.clear()
+    q, _ = _started()
+    with caplog.at_level(logging.WARNING, logger="companion.pipeline"):
+        _fly_repeated_fixes(q, 30.0)
+    (warning,) = gnss_warnings()
+    assert warning.endswith("requested 10 Hz"), warning

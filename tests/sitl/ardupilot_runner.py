@@ -33,7 +33,7 @@ from typing import Any
 from pymavlink import mavutil
 
 from tests.sitl import harness
-from tests.sitl.dataflash import SitlLog, Track, newest_log, read_log
+from tests.sitl.dataflash import SitlLog, Track, newest_log, read_gps_raw, read_log
 from tests.sitl.harness import GroundStation, Processes, ServiceTap
 
 MAV = mavutil.mavlink
@@ -223,6 +223,12 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         tap.close()
     log = read_log(newest_log(procs.workdir))
     result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0)
+    # how far GPS_RAW_INT's time_usec trails the fix's time of validity: what GPS1_DELAY_MS
+    # should be (the simulator's SIM_GPS1_LAG_MS is not that lag as the autopilot stamps it)
+    tlogs = sorted((procs.workdir / "companion-logs").glob("*.tlog"))
+    result["gps_lag_s"] = (
+        log.lag_s(read_gps_raw(tlogs[0]), t_cruise, result["healthy"]["t1_s"]) if tlogs else None
+    )
     result["t_armed_s"] = t_armed
     result["service_messages"] = dict(tap.counts)
     result["all_alerts"] = [

@@ -9,10 +9,11 @@ the same clock) are scored against the truth interpolated to their time.
 from __future__ import annotations
 
 import bisect
+import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from pymavlink import DFReader
+from pymavlink import DFReader, mavutil
 
 from tests.sitl.harness import horizontal_m
 
@@ -62,6 +63,21 @@ class SitlLog:
                     out.append(horizontal_m(ref[0], ref[1], lat, lon))
         return out
 
+    def lag_s(self, fixes: Track, t0: float, t1: float) -> float | None:
+        """The lag (s, 0 to 0.2 by 1 ms) that best places ``fixes`` (positions at their
+        stamps) on the truth: the truth at ``stamp - lag`` nearest them on average."""
+        best: tuple[float, float] | None = None
+        for lag_ms in range(0, 201):
+            lag = lag_ms / 1000.0
+            err = [
+                horizontal_m(ref[0], ref[1], lat, lon)
+                for t, lat, lon in zip(fixes.t_s, fixes.lat_deg, fixes.lon_deg, strict=True)
+                if t0 <= t <= t1 and (ref := self.truth.at(t - lag)) is not None
+            ]
+            if err and (best is None or statistics.fmean(err) < best[1]):
+                best = (lag, statistics.fmean(err))
+        return None if best is None else best[0]
+
     def param_changes(self, name: str) -> list[tuple[float, float]]:
         return [(t, v) for t, n, v in self.params if n == name]
 
@@ -71,6 +87,21 @@ def newest_log(workdir: Path) -> Path:
     if not logs:
         raise FileNotFoundError(f"no DataFlash log in {workdir / 'logs'}")
     return logs[-1]
+
+
+def read_gps_raw(tlog: Path) -> Track:
+    """The distinct GPS_RAW_INT fixes the service received (its own recording), each at
+    its ``time_usec`` (the autopilot's clock)."""
+    conn = mavutil.mavlink_connection(str(tlog))
+    track, seen = Track(), set()
+    try:
+        while (m := conn.recv_match(type="GPS_RAW_INT")) is not None:
+            if m.fix_type >= 3 and m.time_usec not in seen:
+                seen.add(m.time_usec)
+                track.append(m.time_usec * 1e-6, m.lat * 1e-7, m.lon * 1e-7)
+    finally:
+        conn.close()
+    return track
 
 
 def read_log(path: Path) -> SitlLog:

@@ -2,9 +2,10 @@
 
 One flight (:mod:`tests.sitl.ardupilot_runner`, ``flight``) serves the healthy-cruise and
 the outage tests: a mission circuit, ``CRUISE_S`` of healthy GPS, 30 s without GPS 1,
-30 s after. The autopilot is set up as docs/deploy.md asks: ``GPS1_DELAY_MS`` = SITL's
-GPS lag (``SIM_GPS1_LAG_MS``, 100 ms), which EKF3 and the service both use; the service
-does not feed the autopilot (no GPS of type 14). The speed-up
+30 s after. The autopilot is set up as docs/deploy.md asks, with ``GPS1_DELAY_MS`` at
+SITL's ``SIM_GPS1_LAG_MS`` (100 ms), which EKF3 and the service both use; the service
+does not feed the autopilot (no GPS of type 14). The lag as the autopilot stamps it is
+shorter (``SITL_GPS_LAG_MS``, measured in every flight): see the p95 test. The speed-up
 (``COMPANION_SITL_SPEEDUP``, default 5) changes only the wall time: every score is on
 the autopilot's clock against the simulator's truth. ``python bench/sitl.py`` flies the
 same scenarios longer and prints the figures.
@@ -26,6 +27,10 @@ pytestmark = [pytest.mark.sitl, skip_unless("arduplane")]
 SPEEDUP = float(os.environ.get("COMPANION_SITL_SPEEDUP", "5"))
 CRUISE_S = 300.0
 OUTAGE_S = 30.0
+SITL_GPS_LAG_MS = 83
+"""GPS_RAW_INT ``time_usec`` minus the fix's time of validity in ArduPilot SITL (4.7-dev,
+``SIM_GPS1_LAG_MS`` 100): measured from the truth, 83 ms in plane and copter flights."""
+PARAMS = '{"GPS1_DELAY_MS": 100}'
 RUNNER = "tests.sitl.ardupilot_runner"
 
 
@@ -47,7 +52,7 @@ def plane_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "--after-s",
         "30",
         "--params",
-        '{"GPS1_DELAY_MS": 100}',
+        PARAMS,
     ]
     return run_scenario(RUNNER, args, out, timeout_s=600.0)
 
@@ -63,14 +68,26 @@ def test_plane_healthy_cruise(plane_flight: dict[str, Any]) -> None:
 
 @pytest.mark.xfail(
     strict=True,
-    reason="p95 0.56 m against EKF3's 0.50 m (mean 0.41 against 0.46): the service runs "
-    "0.3-0.6 m ahead along the track (EKF3 0.47 m, one 20 ms loop at 23.5 m/s); the cause "
-    "of the service's lead (GPS_RAW_INT's stamp against the logged GPS, which trails the "
-    "truth by 0.112 s with SIM_GPS1_LAG_MS 100) is not found yet",
+    reason="GPS1_DELAY_MS 100 overstates this SITL's GPS lag by 17 ms (83 ms from the fix's "
+    "validity to GPS_RAW_INT time_usec, measured from the truth: test_sitl_gps_lag): every fix "
+    "placed 17 ms early, the service 0.4 m ahead along track (p95 0.62 against EKF3's 0.50 m; "
+    "EKF3 runs 20 ms ahead too). With 83 ms the p95 passes (0.31 against 0.39 m) but over the "
+    "30 s outage the service's max error then exceeds EKF3's (25 against 20 m, 2 of 2 flights; "
+    "12 against 19 m at 100 ms), not understood yet",
 )
 def test_plane_healthy_cruise_p95(plane_flight: dict[str, Any]) -> None:
     svc, ap = plane_flight["healthy"]["service"], plane_flight["healthy"]["autopilot"]
     assert svc["p95_m"] <= ap["p95_m"], (svc, ap)
+
+
+@pytest.mark.parametrize("flight", ["plane_flight", "copter_flight"])
+def test_sitl_gps_lag(flight: str, request: pytest.FixtureRequest) -> None:
+    """How far GPS_RAW_INT's ``time_usec`` trails the fix's validity in this SITL (what
+    GPS1_DELAY_MS should be): another SITL build with another GPS path shows here, not as
+    an unexplained along-track error."""
+    lag_s = request.getfixturevalue(flight)["gps_lag_s"]
+    assert lag_s is not None
+    assert abs(lag_s * 1000.0 - SITL_GPS_LAG_MS) <= 5.0, lag_s
 
 
 def test_plane_gps_outage(plane_flight: dict[str, Any]) -> None:
@@ -110,7 +127,7 @@ def copter_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "--after-s",
         "20",
         "--params",
-        '{"GPS1_DELAY_MS": 100}',
+        PARAMS,
     ]
     return run_scenario(RUNNER, args, out, timeout_s=600.0)
 
