@@ -331,6 +331,9 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("INT_BARO_WIN", "integrity.baro_window_s"),
     ("INT_BARO_MIN_H", "integrity.baro_min_height_m"),
     ("ENG_IMU_CHECK", "engine.imu_grade_check"),
+    ("HDG_GND_MAX_PTCH", "heading.ground_max_pitch_deg"),
+    ("HDG_GND_RELEASE", "heading.ground_release_s"),
+    ("HDG_GND_REL_HGT", "heading.ground_release_height_m"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -199,7 +199,6 @@ class Engine:
         self.watch = StreamWatch(cfg.silence_timeout_s, cfg.no_gnss_alert_s, cfg.no_gnss_repeat_s)
         """Silence of the autopilot's data and no GNSS at all (:mod:`.silence`)."""
         self._landed: LandedState | None = None
-        self._airborne = False
         self.now_s: float | None = None
         self._publish_tick = -1
         self._last_publish_s = -math.inf
@@ -444,8 +443,7 @@ class Engine:
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         self._yaw_rad = sample.yaw_rad
         self._attitude = sample
-        if not self._airborne:  # the taxi heading correction runs before take-off
-            self.heading.on_attitude(sample)
+        self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?
         correction_rad = self.heading.correction_rad
         if self.navigators.on_attitude(sample, correction_rad) and self.coast is not None:
             self.coast.on_attitude(sample, correction_rad)
@@ -502,10 +500,9 @@ class Engine:
         state = sample.landed_state
         self._landed = state
         on_ground = None if state is LandedState.UNDEFINED else state is LandedState.ON_GROUND
+        # one input of the ground decision: "in air" alone is not a flight (ArduPlane
+        # says so as soon as it rolls); the next fix decides with the motion
         self.heading.on_landed_state(on_ground)
-        if state in (LandedState.IN_AIR, LandedState.LANDING) and not self._airborne:
-            self._airborne = True
-            return self.heading.end_taxi(sample.t_s)
         return []
 
     def _on_vfr_hud(self, sample: VfrHudSample) -> list[Output]:
@@ -554,9 +551,16 @@ class Engine:
         return []
 
     def _on_gnss(self, fix: GnssFix) -> list[Output]:
-        # the heading is corrected during the taxi before take-off (Markelov et al.); once
-        # airborne the correction (applied or not) stands for the rest of the flight
-        outputs: list[Output] = [] if self._airborne else self.heading.on_gnss(fix)
+        # the heading is corrected during the taxi (Markelov et al.); in the air the
+        # correction (applied or not) stands until back on the ground
+        heading = self.heading
+        was_airborne = heading.airborne
+        heading.observe_fix(fix)
+        outputs: list[Output]
+        if heading.airborne:
+            outputs = [] if was_airborne else heading.end_taxi(fix.t_s)
+        else:
+            outputs = heading.on_gnss(fix)
         navs = self.navigators
         navs.select(self.now_s)
         rid = fix.receiver_id
@@ -837,8 +841,9 @@ class Engine:
             self.coast = InertialCoast(self._coast_config, gravity)
 
     def _on_ground(self) -> bool:
-        """Not yet airborne by the autopilot's landed state (False when it sends none)."""
-        return not self._airborne and self._landed not in (None, LandedState.UNDEFINED)
+        """On the ground by the heading's ground decision, when the autopilot sends a
+        landed state (False when it sends none)."""
+        return not self.heading.airborne and self._landed not in (None, LandedState.UNDEFINED)
 
     def _anchor_coast(self) -> None:
         """Re-anchor a due coasting slot from the blend at its newest IMU time, only while

@@ -14,6 +14,9 @@ Scenarios:
   then SITL is killed and started again; the service keeps running. Result: how long
   after the autopilot is back (its first HEARTBEAT) the service publishes again, on the
   autopilot's clock.
+* ``taxi``: ArduPlane rolls along the runway in FBWA (``GROUND_STEER_ALT`` = 5, throttle
+  ``--throttle-pwm`` by RC override) for ``--cruise-s``. Result: the service's alerts,
+  the landed states and ground speeds the autopilot reported.
 
 ``python -m tests.sitl.ardupilot_runner flight --speedup 4 --cruise-s 60 --out r.json``
 """
@@ -21,6 +24,7 @@ Scenarios:
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import statistics
@@ -38,6 +42,7 @@ from tests.sitl.harness import GroundStation, Processes, ServiceTap
 
 MAV = mavutil.mavlink
 PLANE_AUTO = 10
+PLANE_FBWA = 5
 COPTER_AUTO, COPTER_GUIDED = 3, 4
 COPTER_ALT_M = 25.0
 HOME_LAT, HOME_LON, HOME_ALT = -35.363261, 149.165230, 584.0
@@ -239,6 +244,68 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
     return result
 
 
+def taxi(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
+    """ArduPlane rolls along the runway in FBWA (``GROUND_STEER_ALT`` = 5, throttle by RC
+    override) for ``--cruise-s``: the service's heading alerts and the landed states the
+    autopilot reported."""
+    tap = ServiceTap()
+    harness.start_ardupilot(procs, "plane", args.speedup)
+    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
+    harness.start_companion(procs, config)
+    gcs = GroundStation()
+    landed: collections.Counter[int] = collections.Counter()
+    speeds: list[float] = []
+    try:
+        gcs.wait_booted()
+        gcs.set_message_rate("EXTENDED_SYS_STATE", 2.0)
+        gcs.set_message_rate("VFR_HUD", 2.0)
+        gcs.set_param("GROUND_STEER_ALT", 5)
+        for name, value in json.loads(args.params).items():
+            gcs.set_param(name, float(value))
+        gcs.set_mode(PLANE_FBWA)
+        gcs.arm()
+        t0 = gcs.now()
+        keep = 65535  # RC_CHANNELS_OVERRIDE: leave the channel alone
+        while gcs.now() - t0 < args.cruise_s:
+            gcs.conn.mav.rc_channels_override_send(
+                gcs.conn.target_system,
+                gcs.conn.target_component,
+                keep,
+                keep,
+                args.throttle_pwm,
+                keep,
+                keep,
+                keep,
+                keep,
+                keep,
+            )
+            gcs.sleep(0.5)
+            ess = gcs.latest.get("EXTENDED_SYS_STATE")
+            vfr = gcs.latest.get("VFR_HUD")
+            if ess is not None:
+                landed[int(ess.landed_state)] += 1
+            if vfr is not None:
+                speeds.append(float(vfr.groundspeed))
+        t_end = gcs.now()
+        if not procs.alive("companion"):
+            raise RuntimeError("companion died:\n" + procs.tail("companion"))
+    finally:
+        gcs.close()
+        procs.stop("companion")
+        procs.stop("sitl")
+        tap.close()
+    return {
+        "t0_s": t0,
+        "t1_s": t_end,
+        "landed_states": {str(k): n for k, n in landed.items()},
+        "ground_speeds_mps": speeds,
+        "alerts": list(tap.alerts),
+        "service_messages": dict(tap.counts),
+        "autopilot_statustexts": gcs.statustexts[-60:],
+        "companion_log_tail": procs.tail("companion", 4000),
+    }
+
+
 def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
     tap = ServiceTap()
     harness.start_ardupilot(procs, "plane", args.speedup)
@@ -313,7 +380,7 @@ def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("scenario", choices=["flight", "reboot"])
+    p.add_argument("scenario", choices=["flight", "reboot", "taxi"])
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--vehicle", choices=["plane", "copter"], default="plane")
     p.add_argument("--speedup", type=float, default=4.0)
@@ -321,13 +388,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cruise-s", type=float, default=60.0)
     p.add_argument("--outage-s", type=float, default=0.0)
     p.add_argument("--after-s", type=float, default=30.0)
+    p.add_argument("--throttle-pwm", type=int, default=1350, help="taxi: RC 3 override")
     p.add_argument("--params", default="{}", help="autopilot parameters to set (JSON)")
     p.add_argument("--config", default="", help="service configuration sections (JSON)")
     p.add_argument("--keep", type=Path, help="work in this folder and keep it")
     args = p.parse_args(argv)
     with harness.workdir(args.keep) as wd, Processes(wd) as procs:
         try:
-            result = (fly if args.scenario == "flight" else reboot)(args, procs)
+            scenario = {"flight": fly, "reboot": reboot, "taxi": taxi}[args.scenario]
+            result = scenario(args, procs)
         except Exception:
             traceback.print_exc()
             for name in ("sitl", "companion"):

@@ -170,3 +170,24 @@ def test_plane_reboot_and_restart(tmp_path: Path) -> None:
         assert event["resume_delay_s"] is not None, event
         assert event["resume_delay_s"] <= 10.0, event
     assert result["companion_alive"]
+
+
+@pytest.fixture(scope="module")
+def plane_taxi(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    out = tmp_path_factory.mktemp("sitl") / "taxi.json"
+    args = ["taxi", "--speedup", f"{SPEEDUP:g}", "--cruise-s", "60", "--throttle-pwm", "1250"]
+    return run_scenario(RUNNER, args, out, timeout_s=300.0)
+
+
+def test_plane_taxi_heading_runs_though_the_autopilot_says_in_air(
+    plane_taxi: dict[str, Any],
+) -> None:
+    """ArduPlane says "in air" as soon as it rolls: the taxi heading correction must
+    still accumulate (and no take-off is announced)."""
+    in_air = plane_taxi["landed_states"].get("2", 0)
+    assert in_air > 0.8 * sum(plane_taxi["landed_states"].values())
+    rolling = [v for v in plane_taxi["ground_speeds_mps"] if v > 2.5]
+    assert len(rolling) > 60 and max(rolling) < 20.0
+    texts = [text for _, text in plane_taxi["alerts"]]
+    assert any(text.startswith("CMP HDG_ACCUM") for text in texts), texts
+    assert not any(text.startswith("CMP HDG_IDLE") for text in texts), texts

@@ -155,9 +155,19 @@ class HeadingConfig:
     max_extrapolation_s
         Furthest the attitude is extrapolated past its newest sample, s.
     ground_max_height_m
-        Fallback ground inference: largest height above the ground reference, m.
+        Ground decision: largest height above the ground reference, m.
     ground_max_climb_mps
-        Fallback ground inference: largest climb rate magnitude (VFR_HUD), m/s.
+        Ground decision: largest climb rate magnitude (VFR_HUD), m/s.
+    ground_max_pitch_deg
+        Ground decision: largest pitch magnitude (ATTITUDE), deg (a tail-wheel
+        aircraft sits at up to about 13 deg).
+    ground_release_s
+        After a flight the autopilot still calls "in air": how long the motion must
+        show the ground (within ``ground_release_height_m`` of the reference) before
+        the taxi is taken as resumed, s.
+    ground_release_height_m
+        Largest height above the ground reference for that release, m (tighter than
+        ``ground_max_height_m``: a low hover is not a taxi).
     """
 
     min_speed_mps: float = ranged(2.5, gt=0.0)
@@ -205,6 +215,9 @@ class HeadingConfig:
     max_extrapolation_s: float = ranged(0.2, ge=0.0)
     ground_max_height_m: float = ranged(15.0, gt=0.0)
     ground_max_climb_mps: float = ranged(1.5, gt=0.0)
+    ground_max_pitch_deg: float = ranged(15.0, gt=0.0, le=90.0)
+    ground_release_s: float = ranged(10.0, ge=0.0)
+    ground_release_height_m: float = ranged(3.0, gt=0.0)
 
     def __post_init__(self) -> None:
         check_ranges(self)

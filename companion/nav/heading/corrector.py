@@ -65,9 +65,9 @@ logger = logging.getLogger(__name__)
 class HeadingCorrector:
     """Taxi heading correction (Markelov et al.): a pure, stepwise estimator.
 
-    Feed it :meth:`on_attitude` (INS heading and rate), :meth:`on_landed_state`
+    Feed it :meth:`on_attitude` (INS heading and rate, pitch), :meth:`on_landed_state`
     (``on_ground`` from EXTENDED_SYS_STATE, ``None`` when not sent),
-    :meth:`on_vfr_hud` (climb rate for the fallback ground inference) and
+    :meth:`on_vfr_hud` (climb rate for the ground decision) and
     :meth:`on_gnss` (one cycle per fix). Outputs are returned, never sent.
 
     Publication: while accumulating, READY or APPLIED, every fix that leaves
@@ -115,15 +115,38 @@ class HeadingCorrector:
     # ------------------------------------------------------------------ inputs
 
     def on_attitude(self, sample: AttitudeSample) -> None:
-        """Buffer the INS heading ``yaw_rad`` and its rate (turn detection)."""
+        """Buffer the INS heading ``yaw_rad`` and its rate (turn detection); the pitch
+        enters the ground decision."""
         self._attitude.add(sample)
+        if math.isfinite(sample.pitch_rad):
+            self._ground.pitch_rad = sample.pitch_rad
 
     def on_landed_state(self, on_ground: bool | None) -> None:
-        """The autopilot's landed state (EXTENDED_SYS_STATE); ``None``: not sent, infer it."""
-        self._ground.explicit = on_ground
+        """The autopilot's landed state (EXTENDED_SYS_STATE), one input of the ground
+        decision (:mod:`companion.nav.heading.ground`); ``None``: not sent."""
+        self._ground.set_landed(on_ground)
+
+    @property
+    def airborne(self) -> bool:
+        """In a flight (landed state "in air" corroborated by the motion); False again
+        once back on the ground (:mod:`companion.nav.heading.ground`)."""
+        return self._ground.airborne
+
+    def observe_fix(self, fix: GnssFix) -> None:
+        """The ground decision at a fix of the configured receiver, in flight too (no
+        cycle, nothing counted): it starts and ends :attr:`airborne`."""
+        if fix.receiver_id != self.config.receiver_id or not math.isfinite(fix.t_s):
+            return
+        speed = fix.ground_speed_mps
+        if fix.vel_ne_mps is not None:
+            vel = np.asarray(fix.vel_ne_mps, dtype=np.float64)
+            if vel.shape == (2,) and np.all(np.isfinite(vel)):
+                speed = float(math.hypot(vel[0], vel[1]))
+        if math.isfinite(speed):
+            self._ground.on_ground(fix, speed)
 
     def on_vfr_hud(self, sample: VfrHudSample) -> None:
-        """Climb rate for the fallback ground inference."""
+        """Climb rate for the ground decision."""
         if math.isfinite(sample.climb_mps):
             self._ground.climb_mps = sample.climb_mps
 
@@ -321,7 +344,7 @@ class HeadingCorrector:
         return self._sample.mean_spread_rad()
 
     def on_ground(self, fix: GnssFix, speed_mps: float) -> bool:
-        """On the ground? The autopilot's landed state when sent, else inferred
+        """On the ground? From the motion, the autopilot's landed state one input
         (:mod:`companion.nav.heading.ground`)."""
         return self._ground.on_ground(fix, speed_mps)
 
