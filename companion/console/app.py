@@ -27,6 +27,7 @@ from textual import on
 from textual.app import App, ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Input, Static
 from textual_plotext import PlotextPlot
@@ -248,7 +249,7 @@ class ConsoleApp(App[int]):
                 self.antenna = AntennaFeed(self.model.station)
                 self.set_interval(ANTENNA_PERIOD_S, self._feed_antenna)
         self.refresh_panels()
-        self.set_interval(REFRESH_S, self.refresh_panels)
+        self.set_interval(REFRESH_S, self._refresh_tick)
         self.set_interval(STALE_CHECK_S, self._refresh_on_stale_change)
 
     async def on_unmount(self) -> None:
@@ -335,11 +336,17 @@ class ConsoleApp(App[int]):
         self.push_screen(ParamScreen())
 
     # ---------------------------------------------------------------- drawing
+    def _refresh_tick(self) -> None:
+        try:
+            self.refresh_panels()
+        except NoMatches:  # a tick while the app closes: the panels are gone
+            return
+
     def _refresh_on_stale_change(self) -> None:
         now = self.clock()
         stale = (self.model.service_stale(now), self.model.autopilot_stale(now))
         if stale != self._stale_shown:
-            self.refresh_panels()
+            self._refresh_tick()
 
     def refresh_panels(self, force_alerts: bool = False) -> None:
         now = self.clock()

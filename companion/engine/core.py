@@ -801,7 +801,9 @@ class Engine:
         if self._fix_fused:
             self._next_fix_s = now_s + interval_s
             self._fix_fused = False
-        due_s = now_s + period_s
+        # the next tick of the publish_rate_hz grid: a due time of now + period would
+        # slip by each sample's wait past it (a 10 Hz output fell to 8.5 Hz in a gap)
+        due_s = (math.floor(now_s * self._publish_rate_hz + 1e-6) + 1) * period_s
         expected_s = self._next_fix_s
         if expected_s >= now_s and due_s > expected_s - 0.5 * period_s:
             late_s = LATE_FIX_INTERVALS * interval_s if interval_s > 0.0 else MAX_HOLD_S
