@@ -39,8 +39,10 @@ from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
 from companion.mavlink.link import LinkError, parse_url
 from companion.mavlink.signing import SigningConfig
+from companion.nav.baro import BaroConfig
 from companion.nav.blend import BlendConfig
 from companion.nav.heading import HeadingConfig
+from companion.nav.imu_innovations import ImuInnovationConfig
 from companion.nav.outage import OutageConfig
 from companion.nav.potential import PotentialConfig
 from companion.ranges import check_ranges, ranged
@@ -137,6 +139,11 @@ class Config:
     coast: CoastConfig = field(default_factory=lambda: CoastConfig.for_grade("mems"))
     """The coasting inertial references (``engine.inertial_reference``): the IMU grade's
     figures; the preset ``--grade tactical`` has the tactical grade's."""
+    baro: BaroConfig = field(default_factory=BaroConfig)
+    """The barometer's height and its calibration against GNSS (:mod:`companion.nav.baro`)."""
+    imu_innovations: ImuInnovationConfig = field(default_factory=ImuInnovationConfig)
+    """The in-flight IMU grade check on the blend's GNSS innovations
+    (``engine.imu_grade_check``; :mod:`companion.nav.imu_innovations`)."""
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     signing: SigningConfig = field(default_factory=SigningConfig)

@@ -74,6 +74,8 @@ PREFIXES: dict[str, str] = {
     "integrity.phase": "PHS",
     "potential": "POT",
     "coast": "CST",
+    "baro": "BAR",
+    "imu_innovations": "IMU",
     "decoder": "DEC",
     "encoder": "ENC",
 }
@@ -334,6 +336,28 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("HDG_GND_MAX_PTCH", "heading.ground_max_pitch_deg"),
     ("HDG_GND_RELEASE", "heading.ground_release_s"),
     ("HDG_GND_REL_HGT", "heading.ground_release_height_m"),
+    # [baro]
+    ("BAR_NOISE_FLOOR", "baro.noise_floor_m"),
+    ("BAR_OFFSET_RW", "baro.offset_rw_m2ps"),
+    ("BAR_DRIFT_RW", "baro.drift_rw_m2ps3"),
+    ("BAR_DRIFT_INIT", "baro.initial_drift_sigma_mps"),
+    ("BAR_CAL_INTERVAL", "baro.calib_interval_s"),
+    ("BAR_GNSS_CORR", "baro.gnss_corr_s"),
+    ("BAR_RESUME", "baro.resume_restart_s"),
+    ("BAR_CAL_MIN", "baro.calib_min_s"),
+    ("BAR_MEMORY", "baro.memory_s"),
+    ("BAR_MAX_VACC", "baro.max_vertical_accel_mps2"),
+    ("BAR_JUMP_SIGMAS", "baro.jump_sigmas"),
+    ("BAR_MAX_JUMPS", "baro.max_consecutive_jumps"),
+    ("BAR_TIMEOUT", "baro.timeout_s"),
+    ("BAR_HISTORY", "baro.history_s"),
+    # [imu_innovations]
+    ("IMU_INN_WINDOW", "imu_innovations.window_s"),
+    ("IMU_INN_MIN_FIX", "imu_innovations.min_fixes"),
+    ("IMU_INN_RATIO", "imu_innovations.min_ratio"),
+    ("IMU_INN_NEEDED", "imu_innovations.windows_needed"),
+    ("IMU_INN_SPAN", "imu_innovations.windows_span"),
+    ("IMU_INN_PFA", "imu_innovations.false_alarm_prob"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -157,6 +157,8 @@ class Pipeline:
             cfg.integrity,
             cfg.potential,
             cfg.coast,
+            cfg.baro,
+            cfg.imu_innovations,
         )
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()

@@ -50,7 +50,7 @@ from companion.engine.publish import Publisher, publication_time_s, tick
 from companion.engine.silence import StreamWatch
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
-from companion.nav.baro import BaroHeight, BaroReference
+from companion.nav.baro import BaroConfig, BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
 from companion.nav.frames import LocalFrame, rotation_between_frames
@@ -58,7 +58,8 @@ from companion.nav.gnss import gnss_measurement
 from companion.nav.grades import IMU_GRADES
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
 from companion.nav.imu_check import ImuNoiseCheck
-from companion.nav.navigator import GnssMeasurement, NavState
+from companion.nav.imu_innovations import ImuInnovationCheck, ImuInnovationConfig
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
 from companion.types import (
@@ -156,6 +157,8 @@ class Engine:
         integrity: IntegrityConfig | None = None,
         potential: PotentialConfig | None = None,
         coast: CoastConfig | None = None,
+        baro: BaroConfig | None = None,
+        imu_innovations: ImuInnovationConfig | None = None,
     ) -> None:
         self.config = config or EngineConfig()
         self._outage_config = outage or OutageConfig()
@@ -164,6 +167,11 @@ class Engine:
         self._integrity_config = integrity or IntegrityConfig()
         self._potential_config = potential or PotentialConfig()
         self._coast_config = coast or CoastConfig.for_grade("mems")
+        self._baro_config = baro or BaroConfig()
+        self._imu_innovation_config = imu_innovations or ImuInnovationConfig()
+        self.imu_innovations: ImuInnovationCheck | None = None
+        """The blend's GNSS innovations against the configured grade (None: nothing wider
+        to fall back to; made at each boot by :meth:`_reset`)."""
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
         self._pending_state: dict[str, object] | None = None
@@ -212,7 +220,7 @@ class Engine:
         self._attitude: AttitudeSample | None = None
         """The latest attitude sample (taken again when the heading correction changes)."""
         self.heading = HeadingCorrector(self._heading_config)
-        self.baro = BaroHeight(stats=self.integrity.stats)
+        self.baro = BaroHeight(self._baro_config, stats=self.integrity.stats)
         """The barometer's height, calibrated against trusted GNSS (:mod:`companion.nav.baro`);
         its rejections count in the integrity monitor's ``stats``."""
         self._baro_source: tuple[str, int] | None = None
@@ -220,6 +228,11 @@ class Engine:
         self.imu_check = self._imu_check()
         """The IMU's measured noise against its configured grade (None: nothing wider to
         fall back to)."""
+        self.imu_innovations = (
+            ImuInnovationCheck(self._imu_innovation_config)
+            if self.config.imu_grade_check and self._grade_narrower_than_mems()
+            else None
+        )
         self._imu_source: tuple[str, int] | None = None
 
     def _restart_navigation(self) -> None:
@@ -251,6 +264,8 @@ class Engine:
         self._bridge_cv = False
         """This gap is carried by constant velocity (the evidence said the inertial bridge
         is worse): the pass-through publishes until GNSS is back."""
+        if self.imu_innovations is not None:
+            self.imu_innovations.restart()
 
     # ------------------------------------------------------------------ entry point
 
@@ -401,7 +416,8 @@ class Engine:
         verdict = check.on_imu(sample)
         if verdict is None or not verdict.doubted:
             return []
-        return self._widen_grade(verdict.t_s, verdict.gyro_ratio, verdict.acc_ratio)
+        why = f"IMU noise gyro {verdict.gyro_ratio:.1f}x accel {verdict.acc_ratio:.1f}x its grade's"
+        return self._widen_grade(verdict.t_s, why)
 
     def _imu_check(self) -> ImuNoiseCheck | None:
         """The noise check of the configured blend grade, when a wider grade (the MEMS
@@ -414,10 +430,41 @@ class Engine:
             return None
         return ImuNoiseCheck(cfg.gyro_arw_rad_rts, cfg.accel_vrw_mps_rts)
 
-    def _widen_grade(self, t_s: float, gyro_ratio: float, acc_ratio: float) -> list[Output]:
-        """The IMU is noisier than its configured grade: the MEMS grade from now on for the
-        blend (attitude-aided) and no inertial references, the navigation restarted from
-        the next fix (a receiver excluded on the narrow grade's word is pardoned)."""
+    def _grade_narrower_than_mems(self) -> bool:
+        """Is any figure of the configured blend grade narrower than a MEMS autopilot
+        IMU's (white noise or bias): is there a wider grade to fall back to?"""
+        cfg, mems = self._blend_config, BlendConfig.for_grade("mems")
+        return (
+            cfg.accel_vrw_mps_rts < mems.accel_vrw_mps_rts
+            or cfg.gyro_arw_rad_rts < mems.gyro_arw_rad_rts
+            or cfg.accel_bias_sigma_mps2 < mems.accel_bias_sigma_mps2
+            or cfg.gyro_bias_sigma_radps < mems.gyro_bias_sigma_radps
+        )
+
+    def _check_innovation(self, fix: GnssFix, update: GnssUpdate) -> list[Output]:
+        """One fix's NIS for the in-flight grade check (the blend carrying, normal
+        navigation); the grade widened when its windows say so (:meth:`_widen_grade`)."""
+        check = self.imu_innovations
+        if check is None or update.reason not in ("", "gate") or update.dof <= 0:
+            return []
+        window = check.on_innovation(
+            fix.t_s, update.nis, update.dof, update.gate, self.outage.self_consistent(fix)
+        )
+        if window is None or not check.doubted:
+            return []
+        failed = [w for w in check.windows if w.failed]
+        worst = max(w.ratio for w in failed)
+        why = (
+            f"IMU innovations up to {worst:.1f}x their grade's in {len(failed)} of "
+            f"{len(check.windows)} windows"
+        )
+        return self._widen_grade(fix.t_s, why)
+
+    def _widen_grade(self, t_s: float, why: str) -> list[Output]:
+        """The IMU is worse than its configured grade (``why``: the noise at rest or in
+        flight, or the innovations in flight): the MEMS grade from now on for the blend
+        (attitude-aided) and no inertial references, the navigation restarted from the
+        next fix (a receiver excluded on the narrow grade's word is pardoned)."""
         mems = BlendConfig.for_grade("mems")
         cfg = self._blend_config
         self._blend_config = dataclasses.replace(
@@ -431,12 +478,10 @@ class Engine:
         self._coast_config = CoastConfig.for_grade("mems")
         self._grade_widened = True
         self.imu_check = None
+        self.imu_innovations = None
         self.integrity.stats["imu_grade_widened"] += 1
         self._restart_navigation()
-        text = (
-            f"IMU noise gyro {gyro_ratio:.1f}x accel {acc_ratio:.1f}x its grade's: "
-            "widened to mems, restart; receiver not blamed"
-        )
+        text = f"{why}: widened to mems, restart; receiver not blamed"
         log.warning("t=%.2f s IMU grade doubted: %s", t_s, text)
         return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
 
@@ -623,6 +668,10 @@ class Engine:
         update = navs.on_gnss(meas, verdict.gate)
         if probing and update.fused:
             self.bridge_evidence.after_fusion(meas, blend)  # type: ignore[arg-type]
+        if probing and verdict.gate:
+            widened = self._check_innovation(fix, update)
+            if widened:  # the navigation restarts from the next fix
+                return outputs + widened
         vouched = False
         if not update.fused and update.reason == "gate":
             self.stats.gnss["gate_rejected"] += 1

@@ -70,7 +70,8 @@ def isa_height_m(pressure_pa: float) -> float:
 
 @dataclass(frozen=True, slots=True)
 class BaroConfig:
-    """Noise model and checks of the barometer's height (see the module docstring)."""
+    """The barometer's height: its noise model, its calibration against trusted GNSS and the
+    checks of its readings (``companion.nav.baro``). Read when the service starts."""
 
     noise_floor_m: float = ranged(0.1, gt=0.0)
     """Least white noise of a reading, 1-sigma, m (the measured one is used when larger)."""

@@ -300,6 +300,18 @@ class OutageMonitor:
             and not self._contradicted(fix)
         )
 
+    def self_consistent(self, fix: GnssFix) -> bool:
+        """Is the receiver of ``fix`` self-consistent at its time (its position increments
+        agree with its own velocity) and uncontradicted by another receiver? Then a large
+        innovation of the fix is the navigator's prediction error, not the receiver's."""
+        rx = self._receivers.get(fix.receiver_id)
+        return (
+            rx is not None
+            and rx.last_fix is fix
+            and rx.checks.consistent(fix.t_s, self._check_config())
+            and not self._contradicted(fix)
+        )
+
     def rejected(self, fix: GnssFix) -> None:
         """The engine did not use a usable fix of this receiver (excluded, or the gate
         failed): the rejection clock runs from the first such fix."""
