@@ -29,6 +29,9 @@ class BlendDiagnostics:
     """Fixes fused."""
     gated: int = 0
     heights_fused: int = 0
+    receiver_error_returned: int = 0
+    """Times the receiver-error estimate went beyond what its model allows and the
+    position was returned to the receiver (:meth:`BlendNavigator._receiver_error_check`)."""
     """Independent heights (the barometer through a GNSS gap) fused."""
     """Fixes refused by the innovation gate."""
     rejected: dict[str, int] = field(default_factory=dict)

@@ -70,6 +70,7 @@ class BlendNavigator:
         self._strapdown = cfg.mode == "strapdown"
         self._gm = cfg.gnss_error_model == "gauss_markov"
         self._gates = {m: chi2_gate(cfg.gate_false_alarm_prob, m) for m in range(1, 7)}
+        self._rx_gate = chi2_gate(1e-6, 3)
         self._accel_psd0 = cfg.accel_vrw_mps_rts**2
         self._max_imu_gap_s = cfg.max_imu_gap_s
         self._cov_interval_s = cfg.cov_interval_s
@@ -309,6 +310,8 @@ class BlendNavigator:
         self._last_fuse_t_s = meas.t_s
         self._height_bias_var_m2 = 0.0
         self.diag.fused += 1
+        if self._gm:
+            self._receiver_error_check()
         return GnssUpdate(meas.t_s, True, nis, dof, threshold, innov_pos, s_pos)
 
     def on_height(
@@ -488,6 +491,8 @@ class BlendNavigator:
         snap = self._hist[-1]
         phi, qd = self._model.transition(dt, f_ned, mech.q_nb)
         snap.phi, snap.qd = phi, qd
+        if self._gm:
+            self._rx.decay(dt)
         self._p = predict_covariance(self._p, phi, qd)
         self._hist.append(snapshot_of(mech, self._p))
         horizon = mech.t_s - self.config.history_s
@@ -509,6 +514,45 @@ class BlendNavigator:
             self._model.restart_receiver_error(self._rx.var_ned_m2, self._rx.tau_s)
         elif change == "variance":
             self._model.set_receiver_variance(self._rx.var_ned_m2)
+
+    def _receiver_error_check(self) -> None:
+        """Return the position to the receiver when the receiver-error estimate is beyond
+        what its own model allows (chi-square of the estimate against the stationary
+        variance, 3 dof, false-alarm probability 1e-6).
+
+        The stationary variance comes from the receiver's reported accuracy; an estimate far
+        outside it means the disagreement it holds came from the rest of the state (a
+        velocity bias or an IMU error integrated between fixes), not from a receiver that
+        says it is at the centimetre. The estimate is moved into the position (the sum the
+        fixes constrain is unchanged) and the receiver-error states restart.
+        """
+        b = self._rx.bias_ned_m
+        var = self._rx.var_ned_m2.tolist()
+        if min(var) <= 0.0:
+            return
+        stat = b[0] * b[0] / var[0] + b[1] * b[1] / var[1] + b[2] * b[2] / var[2]
+        if stat <= self._rx_gate:
+            return
+        mech = self._mech
+        mech.pos = [mech.pos[i] + b[i] for i in range(3)]
+        for snap in self._hist:
+            p = snap.pos
+            snap.pos = (p[0] + b[0], p[1] + b[1], p[2] + b[2])
+        for i in range(3):
+            self._fixes_moved_a[i] += b[i]
+        self._rx.bias_ned_m = [0.0, 0.0, 0.0]
+        var_block = np.diag(var)
+        for p_mat in [self._p] + [snap.p_mat for snap in self._hist]:
+            p_mat[IGB : IGB + 3, :] = 0.0
+            p_mat[:, IGB : IGB + 3] = 0.0
+            p_mat[IGB : IGB + 3, IGB : IGB + 3] = var_block
+        self.diag.receiver_error_returned += 1
+        log.info(
+            "receiver-error estimate %.2f %.2f %.2f m is %.0f chi2 for its model: position "
+            "returned to the receiver",
+            *b,
+            stat,
+        )
 
     def _apply(self, idx: int, d: list[float], p_post: FloatArray) -> None:
         """Carry a correction ``d`` (floats) made at snapshot ``idx`` to the newest IMU time

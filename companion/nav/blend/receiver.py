@@ -13,6 +13,8 @@ changes or the reported variance jumps, which marks a new error regime.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from companion.types import FixType, FloatArray
@@ -95,6 +97,15 @@ class ReceiverError:
     def _set_var(self, var: list[float]) -> None:
         self.var_ned_m2 = np.array(var)
         self._var_l = list(var)
+
+    def decay(self, dt_s: float) -> None:
+        """Carry the estimate over ``dt_s`` as its model does: a first-order Gauss-Markov
+        error relaxes towards zero, e^(-dt/tau) (the error state's F is -1/tau; without
+        this the estimate would keep whatever a disagreement once put into it)."""
+        if math.isfinite(self.tau_s) and dt_s > 0.0:
+            k = math.exp(-dt_s / self.tau_s)
+            gb = self.bias_ned_m
+            self.bias_ned_m = [gb[0] * k, gb[1] * k, gb[2] * k]
 
     def rotate(self, rot: FloatArray) -> None:
         """Re-express the estimate in a rotated NED frame (``rot`` (3, 3), old to new)."""
