@@ -77,8 +77,22 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from companion.replay import replay
 
     config = _load_config(args)
+    raw, raw_rejected = None, None
+    if args.raw is not None:
+        from companion.replay import read_raw
+
+        if not args.raw.is_file():
+            raise FileNotFoundError(f"{args.raw}: no such file")
+        raw, raw_rejected = read_raw(args.raw, args.raw_delay_s)
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    summary = replay(args.input, args.output, config, None if args.quiet else _progress)
+    summary = replay(
+        args.input,
+        args.output,
+        config,
+        None if args.quiet else _progress,
+        raw=raw,
+        raw_reader_rejections=raw_rejected,
+    )
     if not args.quiet:
         print(file=sys.stderr)
     print(summary.to_text())
@@ -291,6 +305,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, help="TOML configuration file")
     p.add_argument("--grade", help=GRADE_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument(
+        "--raw",
+        type=Path,
+        help="the raw receiver's .ubx beside the log (RXM-RAWX, RXM-SFRBX, NAV-PVT): its "
+        "carrier-phase solution goes to the integrity monitor",
+    )
+    p.add_argument(
+        "--raw-delay-s",
+        type=float,
+        default=0.0,
+        help="the raw receiver's messages arrive this long after their GPS time (default 0)",
+    )
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser(

@@ -39,7 +39,7 @@ import dataclasses
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from companion.engine.bridge import PotentialBridge
@@ -58,7 +58,7 @@ from companion.nav.gnss import gnss_measurement
 from companion.nav.grades import IMU_GRADES
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
 from companion.nav.imu_check import ImuNoiseCheck
-from companion.nav.navigator import GnssMeasurement, NavState
+from companion.nav.navigator import AnchoredState, GnssMeasurement, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
 from companion.types import (
@@ -74,6 +74,7 @@ from companion.types import (
     LandedStateSample,
     NavMode,
     Output,
+    RawSolution,
     RebootEvent,
     Sample,
     Severity,
@@ -221,6 +222,8 @@ class Engine:
         """The IMU's measured noise against its configured grade (None: nothing wider to
         fall back to)."""
         self._imu_source: tuple[str, int] | None = None
+        self._raw: RawSolution | None = None
+        """The raw receiver's latest carrier-phase solution (a redundant solution)."""
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -261,6 +264,11 @@ class Engine:
             return restored + self.handle(sample)
         kind = type(sample)
         self._sample_counts[kind] += 1
+        if kind is RawSolution:
+            # kept for the integrity monitor; its time is mapped from GPS time, not the
+            # autopilot's own: it does not move the engine's clock
+            self._raw = sample  # type: ignore[assignment]
+            return []
         t_s = sample.t_s
         watch = self.watch
         resumed: list[Output] = []
@@ -579,11 +587,15 @@ class Engine:
         meas = gnss_measurement(fix, self.frame)
         # the references are for flight: on the ground, before the taxi correction, the
         # autopilot's heading can be degrees off and taxi turns turn that into metres
-        refs = (
+        refs: Mapping[str, NavState] | None = (
             self.coast.references(meas.t_s)
             if self.coast is not None and not self._on_ground()
             else None
         )
+        raw = self._raw_reference(meas.t_s)
+        if raw is not None:
+            refs = {**(refs or {}), "tdprp": raw}
+            self.integrity.stats["raw_reference_tested"] += 1
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{rid}_monitored"] += 1
@@ -662,6 +674,24 @@ class Engine:
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    def _raw_reference(self, t_s: float) -> AnchoredState | None:
+        """The raw receiver's carrier-phase solution as a reference for the separation tests
+        (``ref:tdprp``), in the local frame: only one that FIS-RAIM tested and passed, and
+        within ``pair_max_dt_s`` of ``t_s``."""
+        raw, frame = self._raw, self.frame
+        if raw is None or frame is None or not raw.trusted:
+            return None
+        if abs(t_s - raw.t_s) > self._integrity_config.pair_max_dt_s:
+            return None
+        return AnchoredState(
+            t_s=raw.t_s,
+            pos_ned_m=frame.lla_to_ned(raw.lat_rad, raw.lon_rad, raw.alt_msl_m),
+            vel_ned_mps=raw.vel_ned_mps,
+            pos_cov_ned_m2=raw.pos_cov_ned_m2,
+            vel_cov_ned_m2ps2=raw.vel_cov_ned_m2ps2,
+            anchor_t_s=raw.anchor_t_s,
+        )
 
     def _reset_to(self, fix: GnssFix, meas: GnssMeasurement) -> list[Output]:
         """Re-initialise every navigator from ``fix`` (its exclusion, if any, lifted)."""
