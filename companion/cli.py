@@ -249,9 +249,18 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     reference = None if args.reference is None else parse_reference(args.reference)
     if not args.input.is_file():
         raise FileNotFoundError(f"{args.input}: no such file")
+    if args.plot is not None:  # before the work: a missing extra is one line, not a traceback
+        from companion.evaluate.plot import require_matplotlib
+
+        require_matplotlib()
     summary = inspect_file(args.input, args.output, args.start_s, reference)
     print(summary.to_text())
     print(f"track: {args.output}")
+    if args.plot is not None:
+        from companion.inspection_plot import plot_inspection
+
+        plot_inspection(summary, args.plot, title=f"{args.input.name}: T-D PRP and FIS-RAIM")
+        print(f"plot: {args.plot}")
     return 0
 
 
@@ -398,6 +407,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", "-o", type=Path, required=True, help="track CSV")
     p.add_argument("--start-s", type=float, help="epoch 0 this long after the first epoch, s")
     p.add_argument("--reference", help="epoch 0's LAT,LON,ALT (deg, deg, m above the ellipsoid)")
+    p.add_argument(
+        "--plot",
+        type=Path,
+        help="draw the E/N/U track and FIS-RAIM's statistics with their limits to this PNG",
+    )
     p.set_defaults(func=_cmd_inspect)
 
     p = sub.add_parser("install-unit", help="write the systemd unit (--print: to stdout)")

@@ -348,6 +348,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("RAW_MAX_GAP", "raw.max_gap_s"),
     ("RAW_TIME_TOL", "raw.time_tolerance_s"),
     ("RAW_SILENCE", "raw.silence_s"),
+    ("RAW_RECOVERY", "raw.recovery_s"),
     ("RAW_STATUS_RATE", "raw.status_rate_hz"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
