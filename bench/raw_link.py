@@ -31,6 +31,7 @@ import dataclasses
 import math
 import sys
 import tempfile
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -196,20 +197,29 @@ def main() -> int:
         ("fixes: ramp 0.1 m/s north", {"fix_fault": faults.ramp(0.1)}),
     ]
     print(f"{args.ubx.name}: faults from {args.fault_s:.1f} s after the first epoch")
+    print(
+        f"{'run':38} {'solutions':>9} {'tested':>6} {'RAW_FAULT':>9} {'FAULT':>6} "
+        f"{'RAW_BACK':>8}  CMP_RSTAT (1 untested, 2 trusted, 3 fault)"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for name, kw in runs:
             res = run(items, Path(tmp), fault_tow_s=start, **kw)
             s = res.summary
+
+            def first(prefix: str, res: RunResult = res) -> str:
+                times = [tow - start for tow, text in res.alerts if text.startswith(prefix)]
+                return f"{times[0]:+.2f}" if times else "none"
+
+            states = Counter(v for _, v in res.named.get("CMP_RSTAT", []))
             print(
-                f"\n{name}: {s.raw_solutions} carrier solutions, {res.separations_tested} "
-                f"fix separations from them tested"
+                f"{name:38} {s.raw_solutions:9d} {res.separations_tested:6d} "
+                f"{first('CMP RAW_FAULT'):>9} {first('CMP FAULT'):>6} {first('CMP RAW_BACK'):>8}"
+                f"  {dict(sorted(states.items()))}"
             )
             for tow, text in res.alerts:
-                if text.startswith(("CMP RAW", "CMP FAULT", "CMP INTEGRITY")):
-                    print(f"  {tow - start:+7.2f} s  {text}")
-            print(f"  raw rejections: {s.raw_rejections}")
-            stat = res.named.get("CMP_RSTAT", [])
-            print(f"  CMP_RSTAT values: {[v for _, v in stat]}")
+                if text.startswith(("CMP RAW", "CMP FAULT")):
+                    print(f"    {tow - start:+7.2f} s  {text}")
+        print(f"raw rejections (untouched and faulty alike): {s.raw_rejections}")
     return 0
 
 
