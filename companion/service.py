@@ -53,8 +53,10 @@ import os
 import signal
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
@@ -68,6 +70,7 @@ from companion.pipeline import Pipeline
 from companion.raw.link import RawConfig
 from companion.raw.obs import NavWords, PvtFix, RawEpoch
 from companion.recorder import Recorder
+from companion.ubx.reader import UbxSource
 
 log = logging.getLogger(__name__)
 
@@ -315,7 +318,10 @@ class Service:
             stop_reading = threading.Event()
 
             put = _ThreadSafePut(loop, queue)
-            worker = loop.run_in_executor(None, _read_raw, cfg, put, stop_reading)
+            link = self.pipeline.enable_raw()
+            worker = loop.run_in_executor(
+                None, _read_raw, cfg, put, stop_reading, link.reader_rejected
+            )
             delivered = 0
             try:
                 while True:
@@ -336,9 +342,7 @@ class Service:
                     log.warning("raw receiver %s: %s; retrying (%d failed)", what, error, failures)
             else:
                 failures = 0
-                link = self.pipeline.raw
-                if link is not None:
-                    link.rejected["receiver read ended"] += 1
+                link.rejected["receiver read ended"] += 1
                 log.warning(
                     "raw receiver %s: nothing more to read after %d messages; opened again "
                     "in %.1f s",
@@ -555,10 +559,12 @@ def _read_raw(
     cfg: RawConfig,
     put: Callable[[RawEntry], None],
     stop: threading.Event,
+    rejected: Counter[str] | None = None,
 ) -> str:
     """Read the raw receiver until it stops (a worker thread): each message ``put`` with its
-    receive time, then None. Returns why it could not be read ('' when it just ended)."""
-    from companion.ubx.reader import UbxSource, enable_raw_output
+    receive time, then None; bad frames counted in ``rejected`` (this thread alone writes
+    it). Returns why it could not be read ('' when it just ended)."""
+    from companion.ubx.reader import enable_raw_output
 
     try:
         if cfg.device:
@@ -571,7 +577,7 @@ def _read_raw(
             with port:
                 if cfg.configure_receiver:
                     port.write(enable_raw_output(cfg.receiver_port))
-                for item in UbxSource(port):
+                for item in _source(port, rejected):
                     if stop.is_set():
                         break
                     put((time.time(), item))
@@ -582,7 +588,7 @@ def _read_raw(
             return f"cannot open: {exc}"
         with fh:
             last_tow_s: float | None = None
-            for item in UbxSource(fh):
+            for item in _source(fh, rejected):
                 if stop.is_set():
                     break
                 if isinstance(item, RawEpoch):
@@ -595,6 +601,13 @@ def _read_raw(
         return f"read failed: {exc}"
     finally:
         put(None)
+
+
+def _source(stream: IO[bytes], rejected: Counter[str] | None) -> UbxSource:
+    source = UbxSource(stream)
+    if rejected is not None:
+        source.rejected = rejected
+    return source
 
 
 def run_service(config: Config) -> int:

@@ -14,9 +14,13 @@ from companion.service import Service, _read_raw
 CUT = Path(__file__).resolve().parent / "data" / "walk_0827" / "gnss_1730_cut.ubx"
 
 
-def test_the_raw_file_is_read_at_its_pace_off_the_loop() -> None:
+def test_the_raw_file_is_read_at_its_pace_off_the_loop(tmp_path: Path) -> None:
+    data = bytearray(CUT.read_bytes())
+    data[5000] ^= 0xFF  # inside the first RXM-RAWX frame: its checksum fails
+    ubx = tmp_path / "cut.ubx"
+    ubx.write_bytes(bytes(data))
     link = LinkConfig(heartbeat_rate_hz=10.0, state_file="", record_dir="")
-    service = Service(Config(link=link, raw=RawConfig(file=str(CUT))))
+    service = Service(Config(link=link, raw=RawConfig(file=str(ubx))))
 
     async def run() -> None:
         tasks = [asyncio.create_task(service._timer()), asyncio.create_task(service._raw_reader())]
@@ -32,8 +36,10 @@ def test_the_raw_file_is_read_at_its_pace_off_the_loop() -> None:
     assert raw is not None
     # 4 Hz epochs at their own pace: about six in 1.6 s, not the file's 161 at once;
     # the cut's navigation words come at its end, so none is an epoch 0 yet (counted)
-    epochs = raw.rejections().get("epoch 0: fewer than 5 satellites", 0)
+    rejected = raw.rejections()
+    epochs = rejected.get("epoch 0: fewer than 5 satellites", 0)
     assert 3 <= epochs <= 9
+    assert rejected["bad frame"] == 1  # counted by the reader thread, not raised
     # the loop was never held: the 10 Hz heartbeat kept its rate
     assert service.pipeline.stats.out_by_type["HEARTBEAT"] >= 12
 

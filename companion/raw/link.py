@@ -188,6 +188,8 @@ class RawLink:
     def __init__(self, config: RawConfig | None = None) -> None:
         self.config = cfg = config or RawConfig()
         self.rejected: Counter[str] = Counter()
+        self.reader_rejected: Counter[str] = Counter()
+        """What the edge's reader turned away (bad frames): counted by the reader itself."""
         self._lnav = LnavCollector(2)
         self._inav = InavCollector()
         self.ephemerides: dict[tuple[str, int], Ephemeris] = {}
@@ -497,4 +499,5 @@ class RawLink:
             total.update(self._est.rejected)
         total.update({f"GPS: {k}": v for k, v in self._lnav.rejected.items()})
         total.update({f"Galileo: {k}": v for k, v in self._inav.rejected.items()})
+        total.update(self.reader_rejected)
         return dict(total)
