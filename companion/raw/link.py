@@ -41,6 +41,7 @@ FIS-RAIM). docs/raw.md.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter, deque
@@ -52,7 +53,7 @@ from companion.nav.frames import ecef_to_geodetic, geodetic_to_ecef_m
 from companion.ranges import check_ranges, ranged
 from companion.raw.inav import InavCollector
 from companion.raw.lnav import Ephemeris, LnavCollector
-from companion.raw.obs import ALL_BANDS, L1_BANDS, NavWords, PvtFix, RawEpoch
+from companion.raw.obs import ALL_BANDS, L1_BANDS, NavWords, PvtFix, RawEpoch, SignalObs
 from companion.raw.raim import FisRaim, FisRaimConfig, FisRaimResult
 from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint
 from companion.types import (
@@ -182,6 +183,17 @@ def _e7(deg: float) -> int:
     return round(deg * 1e7)
 
 
+def _finite_signal(s: SignalObs) -> bool:
+    return all(
+        math.isfinite(v)
+        for v in (s.pseudorange_m, s.phase_cyc, s.doppler_hz, s.lock_time_s, s.cn0_dbhz)
+    )
+
+
+def _finite_point(point: TrackPoint) -> bool:
+    return bool(np.all(np.isfinite(point.pos_ecef_m)) and np.all(np.isfinite(point.g_enu)))
+
+
 class RawLink:
     """See the module docstring. ``rejected`` counts every rejection by reason."""
 
@@ -277,6 +289,13 @@ class RawLink:
 
     def _on_epoch(self, epoch: RawEpoch, t_rx_s: float) -> list[RawOutput]:
         out: list[RawOutput] = []
+        finite = tuple(s for s in epoch.signals if _finite_signal(s))
+        if len(finite) != len(epoch.signals) or not math.isfinite(epoch.tow_s):
+            self.rejected["non-finite measurement"] += len(epoch.signals) - len(finite)
+            if not math.isfinite(epoch.tow_s):
+                self.rejected["non-finite epoch time"] += 1
+                return out
+            epoch = dataclasses.replace(epoch, signals=finite)
         if self._pending is not None:  # its NAV-PVT never came
             waiting, waiting_rx_s = self._pending
             self._pending = None
@@ -344,11 +363,18 @@ class RawLink:
         if est is None:
             self._start(epoch, pvt)
             return []
-        point = est.step(epoch)
-        if point is None:
+        try:
+            point = est.step(epoch)
+            res = self._fis.update(point) if point is not None else None
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            log.warning("raw receiver: epoch at %.3f s not solved: %s", epoch.tow_s, exc)
+            self.rejected["epoch not solved"] += 1
+            point = None
+        if point is None or not _finite_point(point):
+            if point is not None:
+                self.rejected["non-finite solution"] += 1
             self._restart()
             return []
-        res = self._fis.update(point)
         sats = len({k[:2] for k in point.keys})
         out: list[RawOutput] = []
         if t_s is None:

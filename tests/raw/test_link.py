@@ -207,3 +207,17 @@ def test_after_an_alert_the_solution_is_not_trusted_until_it_passed_long_enough(
     after = [s for s in sols if s.t_s >= t_alert]
     assert after and not any(s.trusted for s in after)
     assert any(not (s.slope_alert or s.residual_alert) for s in after)  # passes between
+
+
+def test_non_finite_measurements_are_counted_and_dropped() -> None:
+    items = list(_items())
+    bad = []
+    for k, item in enumerate(items):
+        if isinstance(item, RawEpoch) and k % 40 == 0:
+            sig = dataclasses.replace(item.signals[0], pseudorange_m=math.nan)
+            item = dataclasses.replace(item, signals=(sig, *item.signals[1:]))
+        bad.append(item)
+    link, out = _run(bad)
+    assert link.rejections()["non-finite measurement"] >= 3
+    sols = [o for o in out if isinstance(o, RawSolution)]
+    assert len(sols) > 100 and all(np.all(np.isfinite(s.pos_cov_ned_m2)) for s in sols)
