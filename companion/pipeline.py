@@ -17,6 +17,11 @@ list) with its clock: a driver asks :meth:`Pipeline.next_due_s` when to call
 :meth:`Pipeline.on_timer` next, on the same clock as the ``t_rx_s`` it passes
 (docs/replay.md).
 
+A raw receiver beside the autopilot (``[raw]``, :mod:`companion.raw.link`): its decoded
+messages come in through :meth:`Pipeline.on_raw`, the autopilot's fixes are shown to
+it (they map its GPS time onto the autopilot clock), its carrier-phase solutions go to
+the engine and its alerts and status values out.
+
 Commands (the MAVLink command protocol): every COMMAND_LONG or COMMAND_INT the
 decoder finds addressed to us is answered by exactly one COMMAND_ACK to its sender,
 a retransmission with the original's result (:mod:`companion.mavlink.commands`);

@@ -13,6 +13,10 @@ What it does with a sample:
   converted into the local NED frame and offered to the navigator, which gates
   it against its prediction; the verdict goes back to the outage monitor, the
   fix and the navigator's verdict to the integrity monitor.
+* A raw receiver's carrier-phase solution (:class:`~companion.types.RawSolution`) is
+  kept; while its own FIS-RAIM trusts it, it goes to the integrity monitor with each
+  fix as the reference ``ref:tdprp`` of the separation tests. Its time is mapped from
+  GPS time at the edge: it does not move the engine's clock.
 * As soon as a fix has been fused (``publish_on_fix``), the navigator's state is
   carried to ``now_s`` and published as a :class:`NavSolution`
   (:mod:`companion.engine.publish`): the solution with that fix in it leaves at once,
