@@ -77,8 +77,22 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from companion.replay import replay
 
     config = _load_config(args)
+    raw, raw_rejected = None, None
+    if args.raw is not None:
+        from companion.replay import read_raw
+
+        if not args.raw.is_file():
+            raise FileNotFoundError(f"{args.raw}: no such file")
+        raw, raw_rejected = read_raw(args.raw, args.raw_delay_s)
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    summary = replay(args.input, args.output, config, None if args.quiet else _progress)
+    summary = replay(
+        args.input,
+        args.output,
+        config,
+        None if args.quiet else _progress,
+        raw=raw,
+        raw_reader_rejections=raw_rejected,
+    )
     if not args.quiet:
         print(file=sys.stderr)
     print(summary.to_text())
@@ -235,9 +249,18 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     reference = None if args.reference is None else parse_reference(args.reference)
     if not args.input.is_file():
         raise FileNotFoundError(f"{args.input}: no such file")
+    if args.plot is not None:  # before the work: a missing extra is one line, not a traceback
+        from companion.evaluate.plot import require_matplotlib
+
+        require_matplotlib()
     summary = inspect_file(args.input, args.output, args.start_s, reference)
     print(summary.to_text())
     print(f"track: {args.output}")
+    if args.plot is not None:
+        from companion.inspection_plot import plot_inspection
+
+        plot_inspection(summary, args.plot, title=f"{args.input.name}: T-D PRP and FIS-RAIM")
+        print(f"plot: {args.plot}")
     return 0
 
 
@@ -291,6 +314,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, help="TOML configuration file")
     p.add_argument("--grade", help=GRADE_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress line")
+    p.add_argument(
+        "--raw",
+        type=Path,
+        help="the raw receiver's .ubx beside the log (RXM-RAWX, RXM-SFRBX, NAV-PVT): its "
+        "carrier-phase solution goes to the integrity monitor",
+    )
+    p.add_argument(
+        "--raw-delay-s",
+        type=float,
+        default=0.0,
+        help="the raw receiver's messages arrive this long after their GPS time (default 0)",
+    )
     p.set_defaults(func=_cmd_replay)
 
     p = sub.add_parser(
@@ -372,6 +407,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", "-o", type=Path, required=True, help="track CSV")
     p.add_argument("--start-s", type=float, help="epoch 0 this long after the first epoch, s")
     p.add_argument("--reference", help="epoch 0's LAT,LON,ALT (deg, deg, m above the ellipsoid)")
+    p.add_argument(
+        "--plot",
+        type=Path,
+        help="draw the E/N/U track and FIS-RAIM's statistics with their limits to this PNG",
+    )
     p.set_defaults(func=_cmd_inspect)
 
     p = sub.add_parser("install-unit", help="write the systemd unit (--print: to stdout)")

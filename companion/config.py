@@ -46,6 +46,7 @@ from companion.nav.imu_innovations import ImuInnovationConfig
 from companion.nav.outage import OutageConfig
 from companion.nav.potential import PotentialConfig
 from companion.ranges import check_ranges, ranged
+from companion.raw.link import RawConfig
 from companion.recorder import RecorderConfig
 
 
@@ -148,6 +149,8 @@ class Config:
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     signing: SigningConfig = field(default_factory=SigningConfig)
     """MAVLink 2 message signing per link ([signing.autopilot], [signing.gcs])."""
+    raw: RawConfig = field(default_factory=RawConfig)
+    """The raw receiver: carrier-phase positions checked by FIS-RAIM (docs/raw.md)."""
 
 
 def load_config(path: Path | None, base: Config | None = None) -> Config:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +28,21 @@ COLUMNS = (
 
 
 @dataclass(frozen=True)
+class TrackEpoch:
+    """One solved epoch of the track, for the plot: time from epoch 0 (s), E/N/U (m),
+    FIS-RAIM's statistics and limits (NaN where unavailable) and its verdict."""
+
+    t_s: float
+    enu_m: tuple[float, float, float]
+    slope_mps: float
+    residual_m2: float
+    residual_limit_m2: float
+    available: bool
+    slope_alert: bool
+    residual_alert: bool
+
+
+@dataclass(frozen=True)
 class InspectSummary:
     epochs: int
     solved: int
@@ -36,6 +51,8 @@ class InspectSummary:
     rejected: dict[str, int]
     fis_unavailable: int = 0
     fis_restarts: int = 0
+    track: tuple[TrackEpoch, ...] = field(default=(), repr=False)
+    slope_limit_mps: float = math.nan
 
     def to_text(self) -> str:
         return (
@@ -86,6 +103,7 @@ def inspect_file(
     est.start(ep0)
     fis = FisRaim()
     solved = alerts = 0
+    track: list[TrackEpoch] = []
     output.parent.mkdir(parents=True, exist_ok=True)
     with open(output, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
@@ -100,6 +118,19 @@ def inspect_file(
             alert = bool(res is not None and res.alert)
             alerts += alert
             e, n, u = tp.delta_enu_m
+            ok = res is not None and res.available
+            track.append(
+                TrackEpoch(
+                    tp.t_s,
+                    (float(e), float(n), float(u)),
+                    res.slope_mps if ok and res is not None else math.nan,
+                    res.residual_m2 if ok and res is not None else math.nan,
+                    res.residual_limit_m2 if ok and res is not None else math.nan,
+                    ok,
+                    bool(res is not None and res.slope_alert),
+                    bool(res is not None and res.residual_alert),
+                )
+            )
             out.writerow(
                 [
                     f"{ep.tow_s:.3f}", f"{math.degrees(la):.9f}", f"{math.degrees(lo):.9f}",
@@ -112,7 +143,15 @@ def inspect_file(
             )  # fmt: skip
     rejected.update(est.rejected)
     return InspectSummary(
-        len(epochs), solved, alerts, ep0.tow_s, dict(rejected), fis.unavailable, fis.restarts
+        len(epochs),
+        solved,
+        alerts,
+        ep0.tow_s,
+        dict(rejected),
+        fis.unavailable,
+        fis.restarts,
+        tuple(track),
+        fis.config.slope_limit_mps,
     )
 
 

@@ -78,6 +78,7 @@ PREFIXES: dict[str, str] = {
     "imu_innovations": "IMU",
     "decoder": "DEC",
     "encoder": "ENC",
+    "raw": "RAW",
 }
 """Configuration block -> the prefix of its parameters' names."""
 
@@ -358,6 +359,21 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("IMU_INN_NEEDED", "imu_innovations.windows_needed"),
     ("IMU_INN_SPAN", "imu_innovations.windows_span"),
     ("IMU_INN_PFA", "imu_innovations.false_alarm_prob"),
+    # [raw]
+    ("RAW_BAUD", "raw.baud"),
+    ("RAW_CONFIGURE", "raw.configure_receiver"),
+    ("RAW_PORT", "raw.receiver_port"),
+    ("RAW_RX_ID", "raw.receiver_id"),
+    ("RAW_BANDS", "raw.bands"),
+    ("RAW_PHASE_SIGMA", "raw.phase_sigma_m"),
+    ("RAW_DRIFT_SIGMA", "raw.drift_sigma_mps"),
+    ("RAW_MIN_SATS", "raw.min_satellites"),
+    ("RAW_MAX_SPAN", "raw.max_span_s"),
+    ("RAW_MAX_GAP", "raw.max_gap_s"),
+    ("RAW_TIME_TOL", "raw.time_tolerance_s"),
+    ("RAW_SILENCE", "raw.silence_s"),
+    ("RAW_RECOVERY", "raw.recovery_s"),
+    ("RAW_STATUS_RATE", "raw.status_rate_hz"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
@@ -370,6 +386,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "blend.cov_discretisation": ("second_order", "van_loan"),
     "potential.velocity_mode": ("measured", "carried"),
     "encoder.output": ("auto", "gps_input", "global_position_sensor"),
+    "raw.receiver_port": ("UART1", "UART2", "USB", "SPI", "I2C"),
+    "raw.bands": ("all", "l1"),
 }
 """Keys holding one of a fixed set of words: the parameter is the word's index here
 (pinned: a new word is appended)."""
@@ -398,6 +416,8 @@ NOT_EXPOSED: dict[str, str] = {
     "signing.gcs.key_file": _SIGNING_WHY,
     "signing.gcs.passphrase": _SIGNING_WHY,
     "signing.gcs.link_id": _SIGNING_WHY,
+    "raw.device": "a device path (text)",
+    "raw.file": "a file path (text); a recording for tests",
 }
 """Configuration keys that are not parameters, and why: set them in the TOML file."""
 

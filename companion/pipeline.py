@@ -17,6 +17,11 @@ list) with its clock: a driver asks :meth:`Pipeline.next_due_s` when to call
 :meth:`Pipeline.on_timer` next, on the same clock as the ``t_rx_s`` it passes
 (docs/replay.md).
 
+A raw receiver beside the autopilot (``[raw]``, :mod:`companion.raw.link`): its decoded
+messages come in through :meth:`Pipeline.on_raw`, the autopilot's fixes are shown to
+it (they map its GPS time onto the autopilot clock), its carrier-phase solutions go to
+the engine and its alerts and status values out.
+
 Commands (the MAVLink command protocol): every COMMAND_LONG or COMMAND_INT the
 decoder finds addressed to us is answered by exactly one COMMAND_ACK to its sender,
 a retransmission with the original's result (:mod:`companion.mavlink.commands`);
@@ -30,6 +35,7 @@ import dataclasses
 import logging
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -55,6 +61,8 @@ from companion.mavlink.params import decode_request as decode_param_request
 from companion.mavlink.px4_agp import Px4AgpSetup
 from companion.mavlink.streams import RateMonitor, select_streams, stream_requests
 from companion.params import LIVE_KEYS, ParamServer
+from companion.raw.link import RawLink
+from companion.raw.obs import NavWords, PvtFix, RawEpoch
 from companion.types import (
     Alert,
     AlertCode,
@@ -68,6 +76,7 @@ from companion.types import (
     ImuSample,
     NavMode,
     Output,
+    RawSolution,
     RebootEvent,
     Severity,
 )
@@ -190,6 +199,34 @@ class Pipeline:
         rate): read over the parameter protocol when it appears and after a reboot."""
         self._loop_rate_hz: float | None = None
         self._warned_no_mav_gps = False
+        self.raw: RawLink | None = RawLink(self.config.raw) if self.config.raw.enabled else None
+        """The raw receiver's carrier-phase link (``[raw]``; :mod:`companion.raw.link`)."""
+
+    def enable_raw(self) -> RawLink:
+        """The raw link, made now if the configuration named no device or file (a replay
+        given a .ubx beside its log)."""
+        if self.raw is None:
+            self.raw = RawLink(self.config.raw)
+        return self.raw
+
+    def on_raw(self, item: RawEpoch | NavWords | PvtFix, t_rx_s: float) -> list[bytes]:
+        """One message of the raw receiver (decoded at the edge); return the frames to send:
+        its carrier-phase solution goes to the engine (the integrity monitor's redundant
+        solution), FIS-RAIM's alerts and the ``CMP_R*`` values are published."""
+        link = self.enable_raw()
+        return self._raw_outputs(link.on_item(item, t_rx_s))
+
+    def _raw_outputs(self, outputs: Sequence[RawSolution | Output]) -> list[bytes]:
+        frames: list[bytes] = []
+        for out in outputs:
+            if isinstance(out, RawSolution):
+                frames += [f for o in self.engine.handle(out) for f in self._encode(o)]
+            elif isinstance(out, Alert):
+                self.engine.stats.alerts[out.code.value] += 1
+                frames += self._encode(out)
+            else:
+                frames += self._encode(out)
+        return frames
 
     # ------------------------------------------------------------------ in
 
@@ -229,6 +266,8 @@ class Pipeline:
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
+                if kind is GnssFix and self.raw is not None:
+                    frames += self._raw_outputs(self.raw.on_fix(sample))  # type: ignore[arg-type]
                 if kind in DATA_KINDS and (kind is not GnssFix or not self._inertial_clock):
                     # a fix's time is its time of validity, before its arrival by the
                     # receiver's latency: the inertial streams carry the clock when they run

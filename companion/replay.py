@@ -12,6 +12,15 @@ time, before the next record, as the live service's timer would: a silence in th
 produces its alerts when they were due, not when the next record arrives. The
 replay is deterministic: the same input and configuration give byte-identical
 output (docs/replay.md).
+
+With a raw receiver's recording beside the log (``raw``: a u-blox .ubx with RXM-RAWX,
+RXM-SFRBX and NAV-PVT, :mod:`companion.raw.link`), its messages are fed between the
+log's records at their own time: the epoch's GPS time less :data:`GPS_UTC_LEAP_S`
+(a telemetry log's record times are UNIX time) plus ``raw_delay_s``. Its navigation
+words are all given first: an aircraft's receiver has its ephemerides from before the
+flight, and a recording that starts with the flight would otherwise leave the first
+half-minute without any (a recording is what the replay has; the live link takes
+them as they come).
 """
 
 from __future__ import annotations
@@ -19,8 +28,8 @@ from __future__ import annotations
 import itertools
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from companion.config import Config
@@ -28,10 +37,18 @@ from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.logs import open_flight_log
 from companion.mavlink.tlog import TlogError, TlogWriter, describe_file
 from companion.pipeline import Pipeline
+from companion.raw.obs import NavWords, PvtFix, RawEpoch
+
+RawItem = RawEpoch | NavWords | PvtFix
 
 log = logging.getLogger(__name__)
 
 PROGRESS_EVERY_MESSAGES = 20_000
+GPS_EPOCH_UNIX_S = 315_964_800.0
+"""1980-01-06 00:00:00 UTC as UNIX time."""
+GPS_UTC_LEAP_S = 18.0
+"""GPS time minus UTC since 2017-01-01 (IERS): no leap second announced since."""
+SECONDS_PER_WEEK = 604_800.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,6 +63,11 @@ class ReplaySummary:
     log_duration_s: float
     wall_s: float
     corrupt_records: int
+    raw_solutions: int = 0
+    """Carrier-phase solutions the raw link passed to the engine (``--raw``)."""
+    raw_rejections: dict[str, int] = field(default_factory=dict)
+    integrity_stats: dict[str, int] = field(default_factory=dict)
+    """The integrity monitor's counters (rejections and tests by reason)."""
 
     def to_text(self) -> str:
         """A short human summary."""
@@ -59,7 +81,49 @@ class ReplaySummary:
             + (", ".join(f"{k} {v}" for k, v in sorted(self.rejections.items())) or "none"),
             "alerts: " + (", ".join(f"{k} {v}" for k, v in sorted(self.alerts.items())) or "none"),
         ]
+        if self.raw_solutions or self.raw_rejections:
+            raw = ", ".join(f"{k} {v}" for k, v in sorted(self.raw_rejections.items()))
+            lines.append(
+                f"raw receiver: {self.raw_solutions} carrier-phase solutions; rejected: "
+                + (raw or "none")
+            )
         return "\n".join(lines)
+
+
+def timed_raw_items(items: Iterable[RawItem], delay_s: float = 0.0) -> list[tuple[float, RawItem]]:
+    """A raw receiver's messages in stream order with the UNIX time each is fed at: the
+    navigation words first (time ``-inf``), an epoch and its NAV-PVT at the epoch's GPS
+    time as UTC plus ``delay_s`` (a NAV-PVT before any epoch is dropped: no week)."""
+    words: list[tuple[float, RawItem]] = []
+    timed: list[tuple[float, RawItem]] = []
+    week: int | None = None
+    for item in items:
+        if isinstance(item, NavWords):
+            words.append((-float("inf"), item))
+            continue
+        if isinstance(item, RawEpoch):
+            week = item.week
+            tow_s = item.tow_s
+        elif week is None:
+            continue
+        else:
+            tow_s = item.itow_s
+        utc_s = GPS_EPOCH_UNIX_S + week * SECONDS_PER_WEEK + tow_s - GPS_UTC_LEAP_S
+        timed.append((utc_s + delay_s, item))
+    timed.sort(key=lambda pair: pair[0])  # stable: an epoch before its NAV-PVT
+    return words + timed
+
+
+def read_raw(
+    path: Path, delay_s: float = 0.0
+) -> tuple[list[tuple[float, RawItem]], dict[str, int]]:
+    """:func:`timed_raw_items` of a .ubx file, and the frames its reader rejected."""
+    from companion.ubx.reader import UbxSource
+
+    with open(path, "rb") as fh:
+        source = UbxSource(fh)
+        items = list(source)
+    return timed_raw_items(items, delay_s), dict(source.rejected)
 
 
 def replay(
@@ -67,6 +131,8 @@ def replay(
     out_path: Path,
     config: Config | None = None,
     progress: Callable[[str], None] | None = None,
+    raw: Iterable[tuple[float, RawItem]] | None = None,
+    raw_reader_rejections: dict[str, int] | None = None,
 ) -> ReplaySummary:
     """Feed ``in_path`` through a :class:`Pipeline`, writing what it sends to ``out_path``.
 
@@ -88,16 +154,21 @@ def replay(
             "(no IMU, attitude, GNSS or position record)"
         )
     pipeline = Pipeline(config)
+    raw_iter: Iterator[tuple[float, RawItem]] = iter(raw if raw is not None else ())
+    next_raw = next(raw_iter, None)
+    if raw is not None:
+        pipeline.enable_raw()
     wall0 = time.perf_counter()
     first_t: float | None = None
     last_t = 0.0
     due_s = pipeline.next_due_s()
     count = 0
     with TlogWriter(out_path) as writer:
-        for t_rx_s, msg in itertools.chain((first_record,), records):
-            if first_t is None:
-                first_t = last_t = t_rx_s
-            while due_s <= t_rx_s:
+
+        def timer_until(t_s: float) -> None:
+            """What the pipeline's timer sends up to ``t_s``, at its due times."""
+            nonlocal due_s
+            while due_s <= t_s:
                 # at its due time (the first is due at once: at the first record)
                 t_due_s = max(due_s, last_t)
                 frames = pipeline.on_timer(t_due_s)
@@ -107,6 +178,21 @@ def replay(
                 if not next_s > due_s:  # nothing moved it on: leave it to the next record
                     break
                 due_s = next_s
+
+        for t_rx_s, msg in itertools.chain((first_record,), records):
+            if first_t is None:
+                first_t = last_t = t_rx_s
+            while next_raw is not None and next_raw[0] <= t_rx_s:
+                # the raw receiver's messages due before this record, in time order
+                t_raw_s = max(next_raw[0], last_t)
+                timer_until(t_raw_s)
+                frames = pipeline.on_raw(next_raw[1], t_raw_s)
+                if frames:
+                    writer.write_frames(t_raw_s, frames)
+                last_t = t_raw_s
+                due_s = pipeline.next_due_s()
+                next_raw = next(raw_iter, None)
+            timer_until(t_rx_s)
             last_t = t_rx_s
             frames = pipeline.on_message(msg, t_rx_s)
             if frames:
@@ -131,4 +217,10 @@ def replay(
         log_duration_s=(last_t - first_t) if first_t is not None else 0.0,
         wall_s=time.perf_counter() - wall0,
         corrupt_records=reader.stats["bad_region"],
+        raw_solutions=pipeline.raw.solutions if pipeline.raw is not None else 0,
+        integrity_stats=dict(pipeline.engine.integrity.stats),
+        raw_rejections={
+            **(pipeline.raw.rejections() if pipeline.raw is not None else {}),
+            **(raw_reader_rejections or {}),
+        },
     )

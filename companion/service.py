@@ -20,6 +20,14 @@ Tasks:
   fed from the same loop, at least twice per watchdog timeout, only while every
   reader task is alive.
 
+* the raw receiver (``[raw] device`` or ``file``): its UBX read by pyubx2 in a worker
+  thread (a blocking read never holds the loop), each decoded message handed to the
+  loop with its receive time and fed to the pipeline (:meth:`Pipeline.on_raw`); a
+  file is read at the pace of its epochs. A receiver that stops sending ends the read
+  (the serial read times out), which is logged and counted, and the port is opened
+  again every ``link.reconnect_s``; the CFG-VALSET turning its raw output on is sent
+  at each opening.
+
 SIGTERM and SIGINT stop it cleanly: readers cancelled, links closed, the
 recorder flushed, exit status 0.
 
@@ -43,8 +51,12 @@ import logging
 import math
 import os
 import signal
+import threading
 import time
+from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import IO
 
 from companion.config import Config
 from companion.mavlink.decode import LIGHT_MESSAGE_IDS
@@ -55,7 +67,10 @@ from companion.mavlink.watch import HeartbeatWatch
 from companion.notify import SystemdNotifier
 from companion.params import load_overrides, saved_form
 from companion.pipeline import Pipeline
+from companion.raw.link import RawConfig
+from companion.raw.obs import NavWords, PvtFix, RawEpoch
 from companion.recorder import Recorder
+from companion.ubx.reader import UbxSource
 
 log = logging.getLogger(__name__)
 
@@ -202,6 +217,8 @@ class Service:
             asyncio.create_task(self._reader(name, url), name=f"reader-{name}")
             for name, url in urls.items()
         ]
+        if self.config.raw.enabled:
+            self._readers.append(asyncio.create_task(self._raw_reader(), name="reader-raw"))
         timer = asyncio.create_task(self._timer(), name="timer")
         self.notifier.notify("READY=1")
         log.info(
@@ -288,6 +305,51 @@ class Service:
             finally:
                 self._links.pop(name, None)
                 await link.close()
+            await asyncio.sleep(self.config.link.reconnect_s)
+
+    async def _raw_reader(self) -> None:
+        """The raw receiver's messages, read in a worker thread, fed to the pipeline."""
+        cfg = self.config.raw
+        loop = asyncio.get_running_loop()
+        what = cfg.device or cfg.file
+        failures = 0
+        while not self._stop.is_set():
+            queue: asyncio.Queue[RawEntry] = asyncio.Queue()
+            stop_reading = threading.Event()
+
+            put = _ThreadSafePut(loop, queue)
+            link = self.pipeline.enable_raw()
+            worker = loop.run_in_executor(
+                None, _read_raw, cfg, put, stop_reading, link.reader_rejected
+            )
+            delivered = 0
+            try:
+                while True:
+                    entry = await queue.get()
+                    if entry is None:
+                        break
+                    delivered += 1
+                    t_rx_s, item = entry
+                    frames = self.pipeline.on_raw(item, t_rx_s)
+                    if frames:
+                        await self._send(frames, t_rx_s)
+            finally:
+                stop_reading.set()
+                error = await worker
+            if error:
+                failures += 1
+                if _log_retry(failures):
+                    log.warning("raw receiver %s: %s; retrying (%d failed)", what, error, failures)
+            else:
+                failures = 0
+                link.rejected["receiver read ended"] += 1
+                log.warning(
+                    "raw receiver %s: nothing more to read after %d messages; opened again "
+                    "in %.1f s",
+                    what,
+                    delivered,
+                    self.config.link.reconnect_s,
+                )
             await asyncio.sleep(self.config.link.reconnect_s)
 
     def _load_state(self) -> None:
@@ -472,6 +534,80 @@ class Service:
                 log.error("a link reader has died: not feeding the watchdog")
             sleep_s = min(due_s - time.time(), max_sleep_s)
             await asyncio.sleep(max(sleep_s, 0.0))
+
+
+RawEntry = tuple[float, RawEpoch | NavWords | PvtFix] | None
+"""A raw receiver's message with its receive time; None when the reading ended."""
+
+
+class _ThreadSafePut:
+    """Puts a worker thread's entries on an asyncio queue from outside the loop."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, queue: asyncio.Queue[RawEntry]) -> None:
+        self._loop = loop
+        self._queue = queue
+
+    def __call__(self, entry: RawEntry) -> None:
+        self._loop.call_soon_threadsafe(self._queue.put_nowait, entry)
+
+
+RAW_READ_TIMEOUT_S = 2.0
+"""A serial read of the raw receiver that gets nothing for this long ends the reading."""
+
+
+def _read_raw(
+    cfg: RawConfig,
+    put: Callable[[RawEntry], None],
+    stop: threading.Event,
+    rejected: Counter[str] | None = None,
+) -> str:
+    """Read the raw receiver until it stops (a worker thread): each message ``put`` with its
+    receive time, then None; bad frames counted in ``rejected`` (this thread alone writes
+    it). Returns why it could not be read ('' when it just ended)."""
+    from companion.ubx.reader import enable_raw_output
+
+    try:
+        if cfg.device:
+            import serial  # the edge only: pyserial
+
+            try:
+                port = serial.Serial(cfg.device, cfg.baud, timeout=RAW_READ_TIMEOUT_S)
+            except (OSError, ValueError, serial.SerialException) as exc:
+                return f"cannot open: {exc}"
+            with port:
+                if cfg.configure_receiver:
+                    port.write(enable_raw_output(cfg.receiver_port))
+                for item in _source(port, rejected):
+                    if stop.is_set():
+                        break
+                    put((time.time(), item))
+            return ""
+        try:
+            fh = open(cfg.file, "rb")
+        except OSError as exc:
+            return f"cannot open: {exc}"
+        with fh:
+            last_tow_s: float | None = None
+            for item in _source(fh, rejected):
+                if stop.is_set():
+                    break
+                if isinstance(item, RawEpoch):
+                    if last_tow_s is not None and 0.0 < item.tow_s - last_tow_s < 60.0:
+                        time.sleep(item.tow_s - last_tow_s)  # the recording's own pace
+                    last_tow_s = item.tow_s
+                put((time.time(), item))
+        return ""
+    except OSError as exc:
+        return f"read failed: {exc}"
+    finally:
+        put(None)
+
+
+def _source(stream: IO[bytes], rejected: Counter[str] | None) -> UbxSource:
+    source = UbxSource(stream)
+    if rejected is not None:
+        source.rejected = rejected
+    return source
 
 
 def run_service(config: Config) -> int:

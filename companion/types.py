@@ -142,6 +142,9 @@ class AlertCode(enum.Enum):
     NO_GNSS = "NO_GNSS"
     AP_CONFIG = "AP_CONFIG"
     IMU_GRADE = "IMU_GRADE"
+    RAW_FAULT = "RAW_FAULT"
+    RAW_LOST = "RAW_LOST"
+    RAW_BACK = "RAW_BACK"
 
 
 class HeadingAction(enum.Enum):
@@ -332,6 +335,43 @@ class HeadingCommand:
     action: HeadingAction
 
 
+@dataclass(frozen=True, slots=True)
+class RawSolution:
+    """A position from the raw receiver's carrier phase (T-D PRP, Kim, Walter and Powell)
+    with its own integrity verdict (FIS-RAIM), on the autopilot clock.
+
+    ``t_s`` is the receiver epoch's GPS time mapped onto the autopilot's time (the
+    raw-link edge does it: :mod:`companion.raw.link`). ``pos_cov_ned_m2`` and
+    ``vel_cov_ned_m2ps2`` are (3, 3) in the NED axes at the position; the position's
+    covariance includes the error of the epoch-0 position the solution is anchored
+    at. ``anchor_t_s`` is when the solution's error last changed character (its epoch
+    0, or trust regained after a fault): a separation series against it starts there.
+    ``fis_available`` is False where a subset's predicted separation is too noisy to
+    test (no verdict); ``slope_alert`` / ``residual_alert`` are FIS-RAIM's tests at this
+    epoch; ``fault`` stands from an alert until FIS-RAIM has passed long enough again.
+    """
+
+    t_s: float
+    t_rx_s: float
+    lat_rad: float
+    lon_rad: float
+    alt_msl_m: float
+    vel_ned_mps: FloatArray
+    pos_cov_ned_m2: FloatArray
+    vel_cov_ned_m2ps2: FloatArray
+    anchor_t_s: float
+    satellites: int
+    fis_available: bool
+    slope_alert: bool
+    residual_alert: bool
+    fault: bool
+
+    @property
+    def trusted(self) -> bool:
+        """FIS-RAIM tested the solution and no fault stands: it may judge a receiver."""
+        return self.fis_available and not (self.fault or self.slope_alert or self.residual_alert)
+
+
 Sample = (
     ImuSample
     | AttitudeSample
@@ -344,6 +384,7 @@ Sample = (
     | AutopilotSolution
     | RebootEvent
     | HeadingCommand
+    | RawSolution
 )
 """Anything the decoder gives the engine (:meth:`companion.engine.Engine.handle`)."""
 

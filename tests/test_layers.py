@@ -54,6 +54,7 @@ APPLICATION = frozenset(
         "deploy",
         "evaluate",
         "inspection",
+        "inspection_plot",
         "notify",
         "params",
         "pipeline",

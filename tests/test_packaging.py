@@ -60,6 +60,21 @@ def test_evaluate_plot_without_matplotlib_is_one_line(
     assert captured.err == ""
 
 
+def test_inspect_plot_without_matplotlib_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    ubx = ROOT / "tests" / "data" / "walk_0827" / "gnss_1730_cut.ubx"
+    csv, png = tmp_path / "track.csv", tmp_path / "track.png"
+    _hide_matplotlib(monkeypatch)
+    status = main(["inspect", str(ubx), "-o", str(csv), "--plot", str(png)])
+    captured = capsys.readouterr()
+    assert status != 0
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("companion inspect: error:")
+    assert "pip install 'companion[plot]'" in lines[0]
+    assert not csv.exists() and not png.exists()  # refused before any work
+
+
 def test_plot_evaluation_names_the_extra(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     evaluation = event_case(tmp_path, make_truth())
     _hide_matplotlib(monkeypatch)

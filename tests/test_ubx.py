@@ -76,3 +76,27 @@ def test_inspect_bad_reference_is_one_line(capsys) -> None:
 
     assert main(["inspect", str(UBX), "-o", "/dev/null", "--reference", "91,0,0"]) == 1
     assert "out of range" in capsys.readouterr().err
+
+
+def test_inspect_plot_draws_the_track_and_marks_alerts(tmp_path) -> None:
+    import dataclasses
+
+    from companion.cli import main
+    from companion.inspection import inspect_file
+    from companion.inspection_plot import plot_inspection
+
+    png = tmp_path / "track.png"
+    assert main(["inspect", str(UBX), "-o", str(tmp_path / "t.csv"), "--plot", str(png)]) == 0
+    assert png.stat().st_size > 10_000
+    summary = inspect_file(UBX, tmp_path / "t2.csv")
+    assert len(summary.track) == summary.solved
+    track = list(summary.track)
+    track[20] = dataclasses.replace(track[20], slope_alert=True, slope_mps=0.02)
+    fig = plot_inspection(dataclasses.replace(summary, track=tuple(track)), tmp_path / "a.png")
+    slope_ax = fig.axes[1]
+    marks = [ln for ln in slope_ax.get_lines() if ln.get_label() == "slope alert"]
+    assert len(marks) == 1 and list(marks[0].get_xdata()) == [track[20].t_s]
+    assert {ln.get_ydata()[0] for ln in slope_ax.get_lines() if ln.get_linestyle() == "--"} == {
+        summary.slope_limit_mps,
+        -summary.slope_limit_mps,
+    }

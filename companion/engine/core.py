@@ -13,6 +13,10 @@ What it does with a sample:
   converted into the local NED frame and offered to the navigator, which gates
   it against its prediction; the verdict goes back to the outage monitor, the
   fix and the navigator's verdict to the integrity monitor.
+* A raw receiver's carrier-phase solution (:class:`~companion.types.RawSolution`) is
+  kept; while its own FIS-RAIM trusts it, it goes to the integrity monitor with each
+  fix as the reference ``ref:tdprp`` of the separation tests. Its time is mapped from
+  GPS time at the edge: it does not move the engine's clock.
 * As soon as a fix has been fused (``publish_on_fix``), the navigator's state is
   carried to ``now_s`` and published as a :class:`NavSolution`
   (:mod:`companion.engine.publish`): the solution with that fix in it leaves at once,
@@ -39,7 +43,7 @@ import dataclasses
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from companion.engine.bridge import PotentialBridge
@@ -59,7 +63,7 @@ from companion.nav.grades import IMU_GRADES
 from companion.nav.heading import HeadingConfig, HeadingCorrector, HeadingStatus
 from companion.nav.imu_check import ImuNoiseCheck
 from companion.nav.imu_innovations import ImuInnovationCheck, ImuInnovationConfig
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
+from companion.nav.navigator import AnchoredState, GnssMeasurement, GnssUpdate, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
 from companion.types import (
@@ -75,6 +79,7 @@ from companion.types import (
     LandedStateSample,
     NavMode,
     Output,
+    RawSolution,
     RebootEvent,
     Sample,
     Severity,
@@ -234,6 +239,8 @@ class Engine:
             else None
         )
         self._imu_source: tuple[str, int] | None = None
+        self._raw: RawSolution | None = None
+        """The raw receiver's latest carrier-phase solution (a redundant solution)."""
 
     def _restart_navigation(self) -> None:
         """The navigation from scratch, started again by the next usable fix (at start,
@@ -276,6 +283,11 @@ class Engine:
             return restored + self.handle(sample)
         kind = type(sample)
         self._sample_counts[kind] += 1
+        if kind is RawSolution:
+            # kept for the integrity monitor; its time is mapped from GPS time, not the
+            # autopilot's own: it does not move the engine's clock
+            self._raw = sample  # type: ignore[assignment]
+            return []
         t_s = sample.t_s
         watch = self.watch
         resumed: list[Output] = []
@@ -624,11 +636,15 @@ class Engine:
         meas = gnss_measurement(fix, self.frame)
         # the references are for flight: on the ground, before the taxi correction, the
         # autopilot's heading can be degrees off and taxi turns turn that into metres
-        refs = (
+        refs: Mapping[str, NavState] | None = (
             self.coast.references(meas.t_s)
             if self.coast is not None and not self._on_ground()
             else None
         )
+        raw = self._raw_reference(meas.t_s)
+        if raw is not None:
+            refs = {**(refs or {}), "tdprp": raw}
+            self.integrity.stats["raw_reference_tested"] += 1
         if not self._fuse_receiver(fix):
             # the other receiver: the integrity monitor's independent solution only
             self.stats.gnss[f"rx{rid}_monitored"] += 1
@@ -711,6 +727,24 @@ class Engine:
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    def _raw_reference(self, t_s: float) -> AnchoredState | None:
+        """The raw receiver's carrier-phase solution as a reference for the separation tests
+        (``ref:tdprp``), in the local frame: only one that FIS-RAIM tested and passed, and
+        within ``pair_max_dt_s`` of ``t_s``."""
+        raw, frame = self._raw, self.frame
+        if raw is None or frame is None or not raw.trusted:
+            return None
+        if abs(t_s - raw.t_s) > self._integrity_config.pair_max_dt_s:
+            return None
+        return AnchoredState(
+            t_s=raw.t_s,
+            pos_ned_m=frame.lla_to_ned(raw.lat_rad, raw.lon_rad, raw.alt_msl_m),
+            vel_ned_mps=raw.vel_ned_mps,
+            pos_cov_ned_m2=raw.pos_cov_ned_m2,
+            vel_cov_ned_m2ps2=raw.vel_cov_ned_m2ps2,
+            anchor_t_s=raw.anchor_t_s,
+        )
 
     def _reset_to(self, fix: GnssFix, meas: GnssMeasurement) -> list[Output]:
         """Re-initialise every navigator from ``fix`` (its exclusion, if any, lifted)."""

@@ -14,6 +14,7 @@ forward).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -73,6 +74,15 @@ class NavState:
     pos_cov_ned_m2: FloatArray
     vel_cov_ned_m2ps2: FloatArray
     yaw_rad: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class AnchoredState(NavState):
+    """A reference solution whose error is a constant between anchors plus white noise
+    (a carrier-phase position from its epoch 0): ``anchor_t_s`` changes when it is
+    anchored again, and a separation series against it restarts there."""
+
+    anchor_t_s: float = math.nan
 
 
 class Navigator(Protocol):

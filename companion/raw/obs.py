@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 C_MPS = 299_792_458.0
@@ -72,3 +73,21 @@ class NavWords:
     sv: int
     words: tuple[int, ...]
     signal: str = "L1"
+
+
+@dataclass(frozen=True)
+class PvtFix:
+    """The receiver's own solution (u-blox NAV-PVT): ellipsoidal and MSL heights, the
+    carrier-solution state, its accuracy estimates (m; NaN when not decoded)."""
+
+    itow_s: float
+    lat_deg: float
+    lon_deg: float
+    height_m: float
+    height_msl_m: float
+    fix_type: int
+    carrier_solution: int
+    num_sv: int
+    h_acc_m: float = math.nan
+    v_acc_m: float = math.nan
+    vel_ned_mps: tuple[float, float, float] = (math.nan, math.nan, math.nan)

@@ -9,28 +9,13 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import IO, Any
 
 from pyubx2 import ERR_LOG, SET_LAYER_RAM, TXN_NONE, UBX_PROTOCOL, UBXMessage, UBXReader
 
-from companion.raw.obs import NavWords, RawEpoch, SignalObs
+from companion.raw.obs import NavWords, PvtFix, RawEpoch, SignalObs
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class PvtFix:
-    """The receiver's own solution (NAV-PVT): ellipsoidal height, carrier-solution state."""
-
-    itow_s: float
-    lat_deg: float
-    lon_deg: float
-    height_m: float
-    height_msl_m: float
-    fix_type: int
-    carrier_solution: int
-    num_sv: int
 
 
 SYSTEMS = {0: "GPS", 1: "SBAS", 2: "Galileo", 3: "BeiDou", 5: "QZSS", 6: "GLONASS", 7: "NavIC"}
@@ -120,6 +105,9 @@ def pvt_to_fix(msg: Any) -> PvtFix:
         fix_type=int(msg.fixType),
         carrier_solution=int(msg.carrSoln),
         num_sv=int(msg.numSV),
+        h_acc_m=float(msg.hAcc) * 1e-3,
+        v_acc_m=float(msg.vAcc) * 1e-3,
+        vel_ned_mps=(float(msg.velN) * 1e-3, float(msg.velE) * 1e-3, float(msg.velD) * 1e-3),
     )
 
 

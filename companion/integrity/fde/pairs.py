@@ -33,7 +33,7 @@ from companion.integrity.fde.receivers import ReceiverState
 from companion.integrity.fde.separation import ReferenceDrift, SeparationResult, SeparationTracker
 from companion.integrity.fde.vertical import VerticalSeparation
 from companion.nav.baro import BaroReference
-from companion.nav.navigator import GnssMeasurement, NavState
+from companion.nav.navigator import AnchoredState, GnssMeasurement, NavState
 from companion.types import FloatArray
 
 log = logging.getLogger(__name__)
@@ -245,9 +245,20 @@ class PairSeparations:
                 drift = self._coast_drift(key, ref, meas)
                 if drift is None:
                     continue
+            elif isinstance(ref, AnchoredState):
+                self._restart_at_anchor(key, ref.anchor_t_s)
             res = self._update(key, t, sep, cov, drift)
             if res is not None:
                 results[key] = res
+
+    def _restart_at_anchor(self, key: PairKey, anchor_t_s: float) -> None:
+        """A reference anchored again (its constant error changed by a step): the pair's
+        series starts again, as a coasting reference's does at its re-anchoring."""
+        if self.ref_anchor_t_s.get(key) != anchor_t_s:
+            if key in self.ref_anchor_t_s:
+                self.stats["reference_reanchored"] += 1
+            self.ref_anchor_t_s[key] = anchor_t_s
+            self._tracker(key).reset()
 
     def _coast_drift(
         self, key: PairKey, ref: CoastState, meas: GnssMeasurement

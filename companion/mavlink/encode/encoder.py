@@ -103,9 +103,13 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
     AlertCode.RTK_BACK: "rtk",
     AlertCode.NO_DATA: "data",
     AlertCode.DATA_BACK: "data",
+    AlertCode.RAW_FAULT: "raw",
+    AlertCode.RAW_LOST: "raw",
+    AlertCode.RAW_BACK: "raw",
 }
-"""Alerts that say one state (GNSS, RTK, the data streams): a change of it is always sent,
-whatever ``statustext_min_interval_s``; only repeats of the state last sent are thinned."""
+"""Alerts that say one state (GNSS, RTK, the data streams, the raw receiver): a change of
+it is always sent, whatever ``statustext_min_interval_s``; only repeats of the state last
+sent are thinned."""
 
 
 class Encoder:
