@@ -46,3 +46,20 @@ def test_conversion_of_the_walk() -> None:
     t0 = walk.pos_t[0]
     windows = [(a - t0, b - t0) for a, b in bench.outages(walk)]
     assert np.allclose(windows, [(25.0, 40.0), (70.0, 85.0)], atol=1e-6)
+
+
+def test_walk_outages_close_within_the_textbook_figure_and_are_covered() -> None:
+    """The walk replayed (no ATTITUDE: the blend's own strapdown INS): the horizontal
+    closure over the two outages is within the real-time textbook filter's 4.6 m, every
+    healthy fix is used, and the published 95 % bound covers the reference >= 95 % of the
+    time horizontally (the gyro's measured noise drives the attitude error; with the
+    datasheet density alone: 4.8 m and 94.6 %). The vertical is not asserted: it closes
+    at 2.5 m against the textbook's 1.9 m (docs/methods.md)."""
+    bench = _bench()
+    if not (bench.DATA_DIR / "imu_1730.csv").exists():
+        pytest.skip("the walk_0827 recording is not beside this checkout (../shared/realdata)")
+    row = bench.walk_row()
+    assert row is not None and row["outages"] == 2
+    assert row["close_h_m"] <= bench.TARGET_H_M
+    assert row["fixes_unused"] == 0
+    assert row["cov95_h"] >= 0.95 and row["cov95_v"] >= 0.95

@@ -38,7 +38,10 @@ fixes, and a window can reliably tell only that noise is larger than modelled.
 
 Without an autopilot attitude the blend aligns itself (:mod:`.alignment`): levelled from
 the accelerometer at rest, yaw fitted to the GNSS velocity changes once moving; it then
-runs strapdown. The receiver's reported accuracies are floored at what the model can
+runs strapdown. Strapdown, the gyro's white noise is measured in use (second differences,
+:mod:`companion.nav.imu_check`): while it exceeds the configured density beyond chance the
+measured density drives the attitude error (``gyro_noise_measured``). The receiver's reported
+accuracies are floored at what the model can
 honour between fixes (``pos_std_floor_m``, ``vel_std_floor_mps``).
 
 Modules: :mod:`.config` (:class:`BlendConfig`), :mod:`.filter` (:class:`BlendNavigator`),

@@ -38,6 +38,12 @@ class BlendConfig:
     """Accelerometer bias 1-sigma (Gauss-Markov steady state), m/s^2."""
     accel_bias_tau_s: float = ranged(3600.0, gt=0.0, finite=False)
     """Accelerometer bias correlation time, s (inf = random constant + walk)."""
+    gyro_noise_measured: bool = True
+    """Strapdown: when the gyro's measured white noise (second differences of its readings
+    over windows of 500 samples) exceeds ``gyro_arw_rad_rts`` beyond chance, that measured
+    density drives the attitude error instead: the vibration of a hand or an airframe,
+    integrated by the INS as error, is noise a datasheet density does not hold
+    (docs/methods.md, "Gyro noise measured in use")."""
     gyro_bias_sigma_radps: float = ranged(5.0 * _DEG / _HOUR_S, gt=0.0)
     """Gyro bias 1-sigma, rad/s."""
     gyro_bias_tau_s: float = ranged(3600.0, gt=0.0, finite=False)

@@ -21,6 +21,9 @@ class BlendDiagnostics:
     """Measurement variances used at the last update, (6,), NaN for absent components."""
     accel_psd_ned: FloatArray = field(default_factory=lambda: np.zeros(3))
     """Accelerometer white-noise PSD in use per NED axis, m^2/s^3."""
+    gyro_psd: float = math.nan
+    """Strapdown: the gyro white-noise PSD driving the attitude error, rad^2/s (NaN until
+    the blend runs strapdown; the configured one unless the IMU measured noisier)."""
     last_nis: float = math.nan
     """Normalised innovation squared of the last fix tested."""
     last_dof: int = 0

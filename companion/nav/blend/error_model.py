@@ -91,6 +91,7 @@ class ErrorModel:
             _F_VARIABLE_ENTRIES + (_F_STRAPDOWN_ENTRIES if self._strapdown else [])
         )
         self._accel_psd_ned = np.zeros(3)
+        self._gyro_psd: float | None = None
         self._gb_var: FloatArray | None = None
         self._gb_tau_s = 300.0
         self.gqg = self._make_gqg()
@@ -111,6 +112,8 @@ class ErrorModel:
     def _make_gqg(self) -> FloatArray:
         g = self._gqg_static.copy()
         g[3:6] = self._accel_psd_ned
+        if self._strapdown and self._gyro_psd is not None:
+            g[6:9] = self._gyro_psd
         if self._gb_var is not None:
             g[IGB : IGB + 3] = 2.0 * self._gb_var / self._gb_tau_s
         return g
@@ -125,6 +128,13 @@ class ErrorModel:
     def set_accel_psd(self, accel_psd_ned: FloatArray) -> None:
         """Use the accelerometer white-noise PSD ``accel_psd_ned`` (3,), m^2/s^3."""
         self._accel_psd_ned = accel_psd_ned
+        self.gqg = self._make_gqg()
+
+    def set_gyro_psd(self, psd_rad2ps: float | None) -> None:
+        """Strapdown: drive the attitude error with the gyro white-noise PSD ``psd_rad2ps``
+        (rad^2/s; None: the configured ``gyro_arw_rad_rts`` squared). Attitude-aided mode
+        ignores it (its attitude noise is the autopilot's attitude error)."""
+        self._gyro_psd = psd_rad2ps
         self.gqg = self._make_gqg()
 
     def restart_receiver_error(self, var_ned_m2: FloatArray, tau_s: float) -> None:

@@ -33,6 +33,7 @@ from companion.nav.blend.history import (
 from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.receiver import ReceiverError
 from companion.nav.frames import LocalFrame, rotation_between_frames
+from companion.nav.imu_check import ImuNoiseCheck, ImuNoiseVerdict
 from companion.nav.kalman import chi2_gate, joseph_update_diag_r, predict_covariance
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
 from companion.nav.rotations import (
@@ -88,6 +89,14 @@ class BlendNavigator:
         )
         self._own_model: ErrorModel | None = None
         self._own_attitude = False
+        self._gyro_meter = (
+            ImuNoiseCheck(cfg.gyro_arw_rad_rts, cfg.accel_vrw_mps_rts)
+            if cfg.gyro_noise_measured
+            else None
+        )
+        """The gyro's measured white noise (kept across restarts: it is the IMU's)."""
+        self._gyro_psd_measured: float | None = None
+        """Gyro PSD measured above the configured one (rad^2/s), None while it is not."""
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -108,6 +117,7 @@ class BlendNavigator:
         self._strapdown = self.config.mode == "strapdown"
         self._own_attitude = False
         self._model = ErrorModel(self.config)
+        self._model.set_gyro_psd(self._gyro_psd_measured)
         self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
         self._init = False
         self._pre_imu: deque[tuple[float, list[float], list[float]]]
@@ -130,6 +140,7 @@ class BlendNavigator:
         self._adaptive.reset()
         self.diag = BlendDiagnostics(accel_psd_ned=np.full(3, self._accel_psd0))
         self._model.reset(self.diag.accel_psd_ned)
+        self._note_gyro_psd()
 
     def on_imu(self, sample: ImuSample) -> None:
         """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
@@ -141,6 +152,11 @@ class BlendNavigator:
         if not math.isfinite(sum(acc_t) + sum(gyro_t)):  # NaN or inf makes the sum non-finite
             self._reject("imu_not_finite")
             return
+        meter = self._gyro_meter
+        if meter is not None and (self._strapdown or self._att_q is None):
+            verdict = meter.on_imu(sample)
+            if verdict is not None:
+                self._follow_gyro_noise(verdict)
         mech = self._mech
         if not self._init:
             if self._pre_imu and sample.t_s <= self._pre_imu[-1][0]:
@@ -582,6 +598,31 @@ class BlendNavigator:
         if self._gm:
             self._rx.inject(d[IGB : IGB + 3])
 
+    def _follow_gyro_noise(self, verdict: ImuNoiseVerdict) -> None:
+        """One window of the gyro's measured noise: above the configured density beyond
+        chance (the check's threshold), the measured PSD drives the attitude error;
+        otherwise the configured one."""
+        q0 = self.config.gyro_arw_rad_rts**2
+        ratio = verdict.gyro_ratio
+        psd = q0 * ratio if ratio > verdict.threshold else None
+        if psd == self._gyro_psd_measured:
+            return
+        if psd is None or self._gyro_psd_measured is None:
+            log.info(
+                "gyro noise %s the configured density (%.1fx)",
+                "above" if psd is not None else "back within",
+                math.sqrt(ratio),
+            )
+        self._gyro_psd_measured = psd
+        self._model.set_gyro_psd(psd)
+        self._note_gyro_psd()
+
+    def _note_gyro_psd(self) -> None:
+        """The gyro PSD in use, in the diagnostics (strapdown only)."""
+        if self._strapdown:
+            psd = self._gyro_psd_measured
+            self.diag.gyro_psd = self.config.gyro_arw_rad_rts**2 if psd is None else psd
+
     def _use_own_attitude(self) -> None:
         """Run strapdown on the blend's own alignment (no autopilot attitude to aid it)."""
         self._own_attitude = True
@@ -590,7 +631,9 @@ class BlendNavigator:
             if self._own_model is None:
                 self._own_model = ErrorModel(dataclasses.replace(self.config, mode="strapdown"))
             self._own_model.reset(self.diag.accel_psd_ned)
+            self._own_model.set_gyro_psd(self._gyro_psd_measured)
             self._model = self._own_model
+            self._note_gyro_psd()
 
     def _own_alignment(self) -> Alignment | None:
         """The blend's attitude as an alignment to restart from (own-alignment runs only)."""
