@@ -189,7 +189,6 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_LEVER_Z", "blend.lever_arm_b_m[2]"),
     ("BLD_ACC_VRW", "blend.accel_vrw_mps_rts"),
     ("BLD_GYR_ARW", "blend.gyro_arw_rad_rts"),
-    ("BLD_GYR_MEASURED", "blend.gyro_noise_measured"),
     ("BLD_ACC_BIAS", "blend.accel_bias_sigma_mps2"),
     ("BLD_ACC_BIAS_TAU", "blend.accel_bias_tau_s"),
     ("BLD_GYR_BIAS", "blend.gyro_bias_sigma_radps"),
@@ -375,6 +374,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("RAW_SILENCE", "raw.silence_s"),
     ("RAW_RECOVERY", "raw.recovery_s"),
     ("RAW_STATUS_RATE", "raw.status_rate_hz"),
+    # [blend], added later
+    ("BLD_GYR_MEASURED", "blend.gyro_noise_measured"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
