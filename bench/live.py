@@ -1,7 +1,8 @@
 """Live cost: ``companion run`` fed a recorded flight in real time over UDP, against replay.
 
     python bench/live.py [--tlog sitl_fixtures/nominal.tlog] [--duration 60] [--rate 250]
-                         [--uniform] [--no-record] [--no-paced] [--json] [--profile OUT]
+                         [--uniform] [--no-record] [--no-paced] [--no-receive] [--json]
+                         [--profile OUT]
 
 The bench is the autopilot. It binds a UDP socket on 127.0.0.1, starts
 ``companion run --master udpin:127.0.0.1:PORT`` (flight recorder on, into a
@@ -18,7 +19,8 @@ together, such as HEARTBEAT and SYSTEM_TIME, still leave together).
 
 Measured, in the same run:
 
-* **CPU** of the service process (its run time from ``/proc/PID/schedstat``;
+* **CPU** of the service process (its run time, every thread's, from
+  ``/proc/PID/task/TID/schedstat``;
   the kernel's share from ``/proc/PID/stat``) over the play (from the first frame
   sent to 1 s after the last), per message and per second of flight played (the
   log time covered);
@@ -35,6 +37,12 @@ Measured, in the same run:
   times more (the ``paced`` column), and batching them would only help at the
   cost of latency. ``live / paced`` is what the live path (event loop, sockets,
   recorder) adds to the same work done at the same pace;
+* **the receive floor** (``--no-receive`` skips it): the same play into a child
+  process that runs the service's event loop and UDP link and does nothing with what
+  it receives (:func:`_child_receive`), measured as the service is. ``receive +
+  paced work`` is the floor of the live cost with this loop on this machine, and
+  ``live - floor`` what the service adds to it (decoding and the pipeline aside:
+  the recorder, the sends, its bookkeeping);
 * **peak RSS** of the service (``VmHWM``);
 * **latency of a fix to the GPS_INPUT built on it** (below), median and 99th
   percentile;
@@ -70,10 +78,45 @@ the GPS_INPUT):
   publication to receiving the GPS_INPUT: the time the service itself takes (reading
   the datagram, decoding, the engine, encoding, sending).
 
-Prints a table with the ratios live / replay and live / paced, the verdicts, and
-a progress line on stderr. ``--profile OUT`` attaches ``py-spy record`` to the
-service during the play. Linux only (``/proc``). Takes about twice ``--duration``
-plus the replay (the paced baseline plays as long as the live run).
+The send of a datagram is stamped before ``sendto``: a service woken by it can take
+the CPU from the bench inside ``sendto`` and answer before the call returns (stamped
+after, a reader thread tried in the service measured a median of 0.02 ms).
+
+What was tried on the receive path, and not kept
+------------------------------------------------
+Measured on the 2-core development machine (shared, load 4 to 7) at 250
+messages/s, in µs of CPU per message, each against a replay of 48 to 65 µs in the
+same run (30 s plays, every thread counted):
+
+* a bare receive loop in C (blocking ``recv``): 6 to 8; in Python, blocking
+  ``socket.recv`` in the main thread: 16 to 21; the asyncio loop with a datagram
+  protocol: 40 to 75 (its ``select`` wake-up, callbacks and handles, cold at
+  every datagram); uvloop: 23 to 27;
+* a reader thread with a blocking socket handing datagrams to the loop, waking it
+  at once for anything but IMU and attitude messages and otherwise after 10 or 20 ms
+  (so that the pipeline works on batches): 64 for the bare loop and thread, the
+  thread's wake-up and the GIL hand-over costing what the loop's did; the service
+  with it 236 and 230 against 234 and 251 without (no gain), fix latency unchanged;
+* draining the socket until EAGAIN on each wake-up: at this pace there is one
+  datagram to read per wake-up (31 to 46 for the bare loop, no better than the
+  protocol);
+* uvloop in the service: 227 and 242 against 231, 243 and 241 (within the noise);
+* the pipeline itself at the live pace, batched (the paced baseline with the frames
+  handed over when a fix arrives or the oldest waiting is W old): 155 (W = 0), 126
+  (10 ms), 120 (20 ms), 130 with fixes handed over at once whatever W (a fix comes
+  every ~10 messages), against 49 back to back; busy-waiting instead of sleeping
+  between messages, 136: the cost is the caches the other processes take meanwhile,
+  not the sleep.
+
+The flight recorder already writes into a buffer handed to the OS every
+``flush_interval_s`` (or when the buffer is full): 2 % of the service's samples in a
+py-spy profile, about 7 µs a message.
+
+Prints a table with the ratios live / replay and live / paced, the floor, the
+verdicts, and a progress line on stderr. ``--profile OUT`` attaches ``py-spy record`` to the
+service during the play. Linux only (``/proc``). Takes about three times
+``--duration`` plus the replay (the paced baseline and the receive floor play as long
+as the live run each).
 """
 
 from __future__ import annotations
@@ -259,6 +302,34 @@ def _child_paced(flight: Flight) -> None:
     print(json.dumps({"work_s": work_ns / 1e9, "cpu_s": cpu_s, "messages": len(frames)}))
 
 
+def _child_receive(port: int) -> None:
+    """In a child process: the receive floor. The service's event loop and UDP link
+    (``udpin``, as ``companion run --master udpin:``) receive the played datagrams and
+    do nothing with them; the knock is answered, so that the bench can start."""
+    import asyncio
+
+    from companion.mavlink.link import open_link
+
+    knock = _gcs_heartbeat()
+
+    async def main() -> None:
+        link = await open_link(f"udpin:127.0.0.1:{port}")
+        stop = asyncio.Event()
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
+
+        async def receive() -> None:
+            while True:
+                if await link.recv() == knock:
+                    await link.send(knock)
+
+        task = asyncio.create_task(receive())
+        await stop.wait()
+        task.cancel()
+        await link.close()
+
+    asyncio.run(main())
+
+
 def paced_baseline(args: argparse.Namespace) -> dict[str, float]:
     """The service's work without its I/O, at the live pace, in a child process."""
     return _child_json(
@@ -284,19 +355,25 @@ def _child_json(args: list[str]) -> dict[str, float]:
 
 
 def _proc_cpu_s(pid: int) -> tuple[float, float, float]:
-    """(run time, utime, stime) of ``pid`` (s).
+    """(run time, utime, stime) of ``pid`` (s), all its threads together.
 
-    The run time is the scheduler's exact count (``/proc/PID/schedstat``, ns); utime
-    and stime (``/proc/PID/stat``) are sampled at the kernel's tick, too coarse and
-    possibly aliased with a 4 ms pace for a total, but they tell the kernel's share.
+    The run time is the scheduler's exact count, summed over the threads
+    (``/proc/PID/task/TID/schedstat``, ns; ``/proc/PID/schedstat`` is the main thread's
+    alone, blind to a receiving thread); utime and stime (``/proc/PID/stat``, the whole
+    process) are sampled at the kernel's tick, too coarse and possibly aliased with a
+    4 ms pace for a total, but they tell the kernel's share. A thread that ended
+    between two readings is missing from the sum (the service's live as long as it).
     """
     with open(f"/proc/{pid}/stat") as fh:
         fields = fh.read().rpartition(")")[2].split()
     ticks = os.sysconf("SC_CLK_TCK")
     user_s, sys_s = int(fields[11]) / ticks, int(fields[12]) / ticks  # stat(5) 14, 15
     try:
-        with open(f"/proc/{pid}/schedstat") as fh:
-            run_s = int(fh.read().split()[0]) / 1e9
+        run_ns = 0
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/schedstat") as fh:
+                run_ns += int(fh.read().split()[0])
+        run_s = run_ns / 1e9
     except (OSError, ValueError, IndexError):
         run_s = user_s + sys_s
     return run_s, user_s, sys_s
@@ -353,13 +430,19 @@ def _drain(sock: socket.socket, received: list[tuple[float, bytes]]) -> None:
 
 
 def play_live(
-    flight: Flight, tmp: Path, record: bool, progress: bool, profile: Path | None = None
+    flight: Flight,
+    tmp: Path,
+    record: bool,
+    progress: bool,
+    profile: Path | None = None,
+    receive_only: bool = False,
 ) -> LiveRun:
     """Start the service, play the flight at its schedule, measure, stop the service.
 
     With ``profile``, ``py-spy record`` samples the service during the play and writes
     a flame graph there (``.svg``; otherwise collapsed stacks, one a line); py-spy must
-    be installed, and its sampling costs the service CPU.
+    be installed, and its sampling costs the service CPU. With ``receive_only``, the
+    process played to is :func:`_child_receive` instead of the service.
     """
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
@@ -373,20 +456,16 @@ def play_live(
     config.write_text(f'[link]\nstate_file = "{tmp / "state.json"}"\nrecord_dir = "{record_dir}"\n')
     err_path = tmp / "service.err"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
+    if receive_only:
+        command = [sys.executable, __file__, "--child-receive", str(port)]
+    else:
+        command = [
+            *(sys.executable, "-m", "companion", "--log-level", "info", "run"),
+            *("--master", f"udpin:127.0.0.1:{port}", "--config", str(config)),
+        ]
     with open(err_path, "wb") as err:
         proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "companion",
-                "--log-level",
-                "info",
-                "run",
-                "--master",
-                f"udpin:127.0.0.1:{port}",
-                "--config",
-                str(config),
-            ],
+            command,
             cwd=ROOT,
             stdout=subprocess.DEVNULL,
             stderr=err,
@@ -427,8 +506,10 @@ def play_live(
             now = time.perf_counter()
             due = start + offsets[k]
             if now >= due:
-                sock.sendto(frames[k], dest)
+                # stamped before the send: a service woken by the datagram may preempt
+                # the bench inside sendto and answer before it returns
                 sent_at[k] = time.perf_counter()
+                sock.sendto(frames[k], dest)
                 k += 1
                 continue
             if select.select([sock], [], [], due - now)[0]:
@@ -436,7 +517,8 @@ def play_live(
             if progress and now >= next_progress:
                 next_progress += 1.0
                 print(
-                    f"\rlive: {now - start:5.1f}/{offsets[-1]:.1f} s played, {k} sent, "
+                    f"\r{'receive' if receive_only else 'live'}: "
+                    f"{now - start:5.1f}/{offsets[-1]:.1f} s played, {k} sent, "
                     f"{len(received)} received",
                     end="",
                     file=sys.stderr,
@@ -535,6 +617,7 @@ def figures(
     paced: dict[str, float] | None,
     live: LiveRun,
     lat: Latencies,
+    receive: LiveRun | None = None,
 ) -> dict[str, Any]:
     """Every figure the table shows (``--json`` prints them)."""
     n = len(flight.frames)
@@ -566,6 +649,8 @@ def figures(
     if paced is not None:
         out["paced_work_us_per_message"] = paced["work_s"] / paced["messages"] * 1e6
         out["paced_process_us_per_message"] = paced["cpu_s"] / paced["messages"] * 1e6
+    if receive is not None:
+        out["receive_cpu_us_per_message"] = receive.cpu_s / n * 1e6
     return out
 
 
@@ -597,6 +682,19 @@ def report(fig: dict[str, Any]) -> str:
             f"{'  paced: whole process, with sleeps':<{w}} {'':>10} "
             f"{fig['paced_process_us_per_message']:>10.1f}"
         )
+    receive_us = fig.get("receive_cpu_us_per_message")
+    if receive_us is not None:
+        lines.append(
+            f"{'  receive floor (loop + UDP link)':<{w}} {receive_us:>10.1f} {'':>10} "
+            f"{'':>10} {receive_us / base_us:>12.2f}"
+        )
+        if paced_us is not None:
+            floor_us = receive_us + paced_us
+            lines += [
+                f"{'  floor: receive + paced work':<{w}} {floor_us:>10.1f} {'':>10} "
+                f"{'':>10} {floor_us / base_us:>12.2f}",
+                f"{'  live - floor (the rest)':<{w}} {live_us - floor_us:>10.1f}",
+            ]
     lines += [
         row(
             "CPU s per s of flight",
@@ -639,6 +737,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--uniform", action="store_true", help="one message every 1/rate s")
     parser.add_argument("--no-record", action="store_true", help="flight recorder off")
     parser.add_argument("--no-paced", action="store_true", help="skip the paced baseline")
+    parser.add_argument(
+        "--no-receive", action="store_true", help="skip the receive floor (loop + link only)"
+    )
     parser.add_argument("--json", action="store_true", help="also print the figures as JSON")
     parser.add_argument(
         "--profile",
@@ -647,10 +748,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--child-replay", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--child-paced", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--child-receive", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     logging.getLogger("companion").setLevel(logging.ERROR)  # the in-process pipelines' alerts
     if args.child_replay:
         _child_replay(args.child_replay)
+        return 0
+    if args.child_receive:
+        _child_receive(args.child_receive)
         return 0
     if not args.tlog.exists():
         print(f"no such tlog: {args.tlog}", file=sys.stderr)
@@ -672,9 +777,13 @@ def main(argv: list[str] | None = None) -> int:
         if not args.no_paced:
             print(f"paced baseline ({flight.offsets_s[-1]:.0f} s) ...", file=sys.stderr)
             paced = paced_baseline(args)
+        receive = None
+        if not args.no_receive:
+            print(f"receive floor ({flight.offsets_s[-1]:.0f} s) ...", file=sys.stderr)
+            receive = play_live(flight, tmp, False, True, receive_only=True)
         print("live ...", file=sys.stderr)
         live = play_live(flight, tmp, not args.no_record, True, args.profile)
-    fig = figures(flight, base, paced, live, latencies(flight, ref, live))
+    fig = figures(flight, base, paced, live, latencies(flight, ref, live), receive)
     print(f"tlog: {args.tlog.name}; flight recorder {'off' if args.no_record else 'on'}")
     print(report(fig))
     if args.json:

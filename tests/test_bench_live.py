@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -46,7 +47,36 @@ def test_a_short_live_play_yields_every_figure(capsys):
         "live_cpu_us_per_message",
         "replay_cpu_us_per_message",
         "paced_work_us_per_message",
+        "receive_cpu_us_per_message",
         "live_peak_rss_mib",
     ):
         assert math.isfinite(fig[key]) and fig[key] > 0.0
     assert "live / replay per message" in out
+
+
+_BUSY_THREAD = """
+import threading, time
+def spin():
+    while time.thread_time() < 0.3:
+        pass
+    print("spun", flush=True)
+    time.sleep(60)
+threading.Thread(target=spin, daemon=True).start()
+time.sleep(60)
+"""
+
+
+def test_the_cpu_of_every_thread_is_counted():
+    # a receiving thread's CPU must not escape the live figure: /proc/PID/schedstat is
+    # the main thread's alone
+    bench = _bench()
+    proc = subprocess.Popen([sys.executable, "-c", _BUSY_THREAD], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "spun"
+        run_s, _, _ = bench._proc_cpu_s(proc.pid)
+        with open(f"/proc/{proc.pid}/schedstat") as fh:
+            main_thread_s = int(fh.read().split()[0]) / 1e9
+    finally:
+        proc.kill()
+        proc.wait()
+    assert run_s >= 0.3 > main_thread_s
