@@ -40,8 +40,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.walk_0827 import write_rover_tlog  # noqa: E402
 from companion.config import Config  # noqa: E402
-from companion.mavlink.tlog import TlogReader, TlogWriter  # noqa: E402
+from companion.mavlink.tlog import TlogReader  # noqa: E402
 from companion.raw import faults  # noqa: E402
 from companion.raw.obs import NavWords, PvtFix, RawEpoch  # noqa: E402
 from companion.replay import (  # noqa: E402
@@ -112,19 +113,7 @@ def write_pvt_tlog(
         )
         unix_s = GPS_EPOCH_UNIX_S + week * SECONDS_PER_WEEK + p.itow_s - GPS_UTC_LEAP_S
         events.append((unix_s + FIX_DELAY_S, 1, msg))
-    t0 = events[0][0] - 1.0
-    t_hb = t0
-    while t_hb < events[-1][0]:
-        hb = mav.MAVLink_heartbeat_message(
-            mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4, 3
-        )
-        events.append((t_hb, 0, hb))
-        t_hb += 1.0
-    events.sort(key=lambda e: (e[0], e[1]))
-    link = mav.MAVLink(None, srcSystem=1, srcComponent=1)
-    with TlogWriter(path, mav=link) as writer:
-        for t, _, m in events:
-            writer.write(t, m)
+    write_rover_tlog(path, events, events[0][0] - 1.0, events[-1][0])
     return {"fixes": len(pvts), "boot_tow_s": boot_tow_s, "first_tow_s": pvts[0].itow_s}
 
 

@@ -40,6 +40,7 @@ import math
 import sys
 import tempfile
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -218,7 +219,23 @@ def write_walk_tlog(walk: Walk, path: Path) -> dict[str, Any]:
         n_fix += 1
     # an autopilot sends its heartbeat from boot: before the first fix and IMU sample
     t_hb = min(float(walk.imu_t[0]), float(walk.pos_t[0])) - 0.5
-    while t_hb < float(walk.imu_t[-1]):
+    write_rover_tlog(path, events, t_hb, float(walk.imu_t[-1]), rec_t)
+    return {"fixes": n_fix, "windows": windows, "boot0_gpst": boot0}
+
+
+def write_rover_tlog(
+    path: Path,
+    events: list[tuple[float, int, Any]],
+    t_first_heartbeat_s: float,
+    t_end_s: float,
+    rec_t: Callable[[float], float] = float,
+) -> None:
+    """Write ``events`` (time, order among equal times, message) as an ArduPilot rover's
+    tlog (system 1, component 1) with its 1 Hz HEARTBEAT from ``t_first_heartbeat_s`` to
+    ``t_end_s``; ``rec_t`` maps an event's time to its record time."""
+    events = list(events)
+    t_hb = t_first_heartbeat_s
+    while t_hb < t_end_s:
         hb = mav.MAVLink_heartbeat_message(
             mav.MAV_TYPE_GROUND_ROVER, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 4, 3
         )
@@ -229,7 +246,6 @@ def write_walk_tlog(walk: Walk, path: Path) -> dict[str, Any]:
     with TlogWriter(path, mav=link) as writer:
         for t, _, msg in events:
             writer.write(rec_t(t), msg)
-    return {"fixes": n_fix, "windows": windows, "boot0_gpst": boot0}
 
 
 def _llh_to_ne(lat_deg: np.ndarray, lon_deg: np.ndarray, lat0: float, lon0: float):
