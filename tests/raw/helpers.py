@@ -13,6 +13,8 @@ from companion.raw.geometry import elevation_rad, saastamoinen_m
 from companion.raw.lnav import Ephemeris
 from companion.raw.obs import C_MPS, SIGNAL_HZ, RawEpoch, SignalObs
 from companion.raw.orbit import rotate_earth, sat_state
+from companion.raw.raim import FisRaim
+from companion.raw.tdprp import Tdprp, TdprpConfig
 from companion.ubx.session import Session, load_session
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "walk_0827"
@@ -78,3 +80,24 @@ def simulate_epoch(
             )
         )
     return RawEpoch(week=week, tow_s=t_true_s + clock_m / C_MPS, signals=tuple(sigs))
+
+
+def fis_raim_alerts(
+    ephs: dict[tuple[str, int], Ephemeris],
+    x0_ecef_m: np.ndarray,
+    config: TdprpConfig,
+    epochs: list[RawEpoch],
+) -> tuple[list[float], FisRaim]:
+    """T-D PRP from ``epochs[0]`` with FIS-RAIM on every later epoch: the receiver times
+    (tow, s) of the epochs that alerted, and the monitor."""
+    est = Tdprp(ephs, x0_ecef_m, config)
+    est.start(epochs[0])
+    fis = FisRaim()
+    alerts = []
+    for ep in epochs[1:]:
+        tp = est.step(ep)
+        assert tp is not None
+        res = fis.update(tp)
+        if res is not None and res.alert:
+            alerts.append(ep.tow_s)
+    return alerts, fis

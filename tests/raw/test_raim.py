@@ -10,8 +10,8 @@ import numpy as np
 from companion.raw.faults import dither, inject, ramp
 from companion.raw.obs import ALL_BANDS
 from companion.raw.raim import FisRaim, FisRaimConfig, restrict, subset_geometry
-from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint, wls
-from tests.raw.helpers import walk
+from companion.raw.tdprp import TdprpConfig, TrackPoint, wls
+from tests.raw.helpers import fis_raim_alerts, walk
 
 
 def _point(g: np.ndarray, y: np.ndarray, w: np.ndarray, t_s: float = 0.0) -> TrackPoint:
@@ -90,17 +90,8 @@ def _walk_run(fault_start_s: float | None, fault=None) -> tuple[list[float], Fis
     eps = s.epochs
     if fault is not None and fault_start_s is not None:
         eps = inject(s.epochs, "Galileo", 26, t0 + fault_start_s, fault)
-    est = Tdprp(s.ephemerides, s.x0_ecef_m, TdprpConfig(bands=ALL_BANDS))
-    est.start(eps[0])
-    fis = FisRaim()
-    alerts = []
-    for ep in eps[1:]:
-        tp = est.step(ep)
-        assert tp is not None
-        res = fis.update(tp)
-        if res is not None and res.alert:
-            alerts.append(tp.t_s - (fault_start_s or 0.0))
-    return alerts, fis
+    tows, fis = fis_raim_alerts(s.ephemerides, s.x0_ecef_m, TdprpConfig(bands=ALL_BANDS), eps)
+    return [tow - t0 - (fault_start_s or 0.0) for tow in tows], fis
 
 
 def test_fis_raim_on_the_real_walk_cut() -> None:

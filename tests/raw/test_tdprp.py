@@ -8,9 +8,9 @@ import numpy as np
 
 from companion.raw.faults import dither, inject, ramp
 from companion.raw.obs import L1_BANDS
-from companion.raw.raim import FisRaim, chi2_raim
+from companion.raw.raim import chi2_raim
 from companion.raw.tdprp import Tdprp, TdprpConfig
-from tests.raw.helpers import simulate_epoch, walk
+from tests.raw.helpers import fis_raim_alerts, simulate_epoch, walk
 
 CFG = TdprpConfig(bands=L1_BANDS, iono_regression=False, step_residual_m=math.inf)
 
@@ -95,17 +95,8 @@ def test_fis_raim_quiet_on_noise_and_alerts_on_a_ramp_and_a_dither() -> None:
     results = {}
     for name, fault in (("none", None), ("ramp", ramp(0.04)), ("dither", dither(1.0, 10.0))):
         eps = epochs if fault is None else inject(epochs, "GPS", 10, t0 + 20.0, fault)
-        est = Tdprp(s.ephemerides, s.x0_ecef_m, CFG)
-        est.start(eps[0])
-        fis = FisRaim()
-        alerts = []
-        for ep in eps[1:]:
-            tp = est.step(ep)
-            assert tp is not None
-            r = fis.update(tp)
-            if r is not None and r.alert:
-                alerts.append(ep.tow_s - t0 - 20.0)
-        results[name] = alerts
+        tows, _ = fis_raim_alerts(s.ephemerides, s.x0_ecef_m, CFG, eps)
+        results[name] = [tow - t0 - 20.0 for tow in tows]
     assert results["none"] == []
     assert results["ramp"] and 0.0 <= results["ramp"][0] < 25.0  # before the ramp is 1 m
     assert results["dither"] and 0.0 <= results["dither"][0] < 10.0
