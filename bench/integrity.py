@@ -338,6 +338,18 @@ class InsOutcome:
     stats: dict[str, int]
 
 
+def fault_events(
+    case: Case | None, rng: np.random.Generator
+) -> tuple[Fault | None, tuple[sim.Event, ...], float]:
+    """The fault of ``case`` (None: none) started at a seeded time of the glide: the fault,
+    the simulator's events that carry it, and its start time (0 without a fault)."""
+    if case is None:
+        return None, (), 0.0
+    t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
+    fault = case.fault(t0, direction(rng, case.axis))
+    return fault, (fault.as_event(t0 + 1000.0),), t0
+
+
 def ins_flight(
     case: Case | None, grade: str, receivers: int, seed: int, baseline: bool
 ) -> InsOutcome:
@@ -345,17 +357,9 @@ def ins_flight(
     from companion.integrity.coast import CoastConfig
     from companion.nav.blend import BlendConfig
     from companion.sim.integrity_runs import run_samples_ins
-    from companion.sim.scenarios import Event
 
     logging.disable(logging.WARNING)
-    rng = np.random.default_rng(seed)
-    fault: Fault | None = None
-    events: tuple[Event, ...] = ()
-    t0 = 0.0
-    if case is not None:
-        t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
-        fault = case.fault(t0, direction(rng, case.axis))
-        events = (fault.as_event(t0 + 1000.0),)
+    fault, events, t0 = fault_events(case, np.random.default_rng(seed))
     scenario = sim.make_scenario(
         "approach", imu_grade=grade, events=events, second_receiver=receivers == 2
     )
@@ -494,17 +498,9 @@ def baro_flight(case: Case | None, seed: int) -> BaroOutcome:
     from companion.integrity.coast import CoastConfig
     from companion.nav.blend import BlendConfig
     from companion.sim.integrity_runs import run_samples_ins
-    from companion.sim.scenarios import Event
 
     logging.disable(logging.WARNING)
-    rng = np.random.default_rng(seed)
-    fault: Fault | None = None
-    events: tuple[Event, ...] = ()
-    t0 = 0.0
-    if case is not None:
-        t0 = GLIDE_START_S + float(rng.uniform(40.0, 80.0))
-        fault = case.fault(t0, direction(rng, case.axis))
-        events = (fault.as_event(t0 + 1000.0),)
+    fault, events, t0 = fault_events(case, np.random.default_rng(seed))
     scenario = sim.make_scenario(
         "approach", imu_grade="mems", events=events, realism=baro_realism()
     )
