@@ -334,6 +334,10 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("HDG_GND_MAX_PTCH", "heading.ground_max_pitch_deg"),
     ("HDG_GND_RELEASE", "heading.ground_release_s"),
     ("HDG_GND_REL_HGT", "heading.ground_release_height_m"),
+    ("BLD_GYR_INSTAB", "blend.gyro_instability_radps"),
+    ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
+    ("ENG_GAP_ATT", "engine.gap_attitude"),
+    ("ENC_GAP_MAX_HACC", "encoder.gap_max_h_acc_m"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
@@ -346,6 +350,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "blend.cov_discretisation": ("second_order", "van_loan"),
     "potential.velocity_mode": ("measured", "carried"),
     "encoder.output": ("auto", "gps_input", "global_position_sensor"),
+    "engine.gap_attitude": ("auto", "autopilot", "rates"),
 }
 """Keys holding one of a fixed set of words: the parameter is the word's index here
 (pinned: a new word is appended)."""

@@ -166,6 +166,11 @@ class Engine:
         self._coast_config = coast or CoastConfig.for_grade("mems")
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
+        self.autopilot_fuses_output = False
+        """The autopilot may fuse what we publish (set by the pipeline from its parameters:
+        a GPS of type MAV taking our GPS_INPUT). With ``gap_attitude = "auto"`` the blend's
+        attitude is then carried by the autopilot's body rates through a GNSS gap, not
+        taken from its attitude (:meth:`BlendNavigator.hold_attitude`)."""
         self._pending_state: dict[str, object] | None = None
         self._grade_widened = False
         """The IMU's measured noise exceeded its configured grade: the references are off
@@ -441,6 +446,13 @@ class Engine:
         return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
+        gap_attitude = self.config.gap_attitude
+        if gap_attitude != "autopilot":
+            # through a gap, an autopilot fusing our output derives its attitude from it
+            self.navigators.hold_attitude(
+                self.outage.mode in OUTAGE_MODES
+                and (gap_attitude == "rates" or self.autopilot_fuses_output)
+            )
         self._yaw_rad = sample.yaw_rad
         self._attitude = sample
         self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?
