@@ -337,7 +337,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_GYR_INSTAB", "blend.gyro_instability_radps"),
     ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
     ("ENG_GAP_ATT", "engine.gap_attitude"),
-    ("ENC_GAP_MAX_HACC", "encoder.gap_max_h_acc_m"),
+    ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

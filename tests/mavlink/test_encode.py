@@ -287,30 +287,3 @@ def test_gps_input_yaw_is_off_by_default() -> None:
 def test_config_rejections_name_the_field(kwargs: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         EncoderConfig(**kwargs)
-
-
-def test_gps_input_says_no_fix_once_a_gap_is_beyond_its_accuracy_limit() -> None:
-    """Through a gap, GPS_INPUT's fix is withdrawn once the bridge's 1-sigma passes
-    ``gap_max_h_acc_m`` and stays withdrawn until GNSS is trusted again; GLOBAL_POSITION_INT
-    is unchanged."""
-    import dataclasses
-
-    enc = Encoder(EncoderConfig(gap_max_h_acc_m=3.0))
-
-    def gps_input(sigma: float, mode: NavMode) -> tuple[int, float]:
-        sol = dataclasses.replace(solution(sigma_ne=(sigma, sigma)), mode=mode)
-        gpi, gin = enc.encode(sol, AutopilotFlavour.ARDUPILOT)
-        assert gpi.lat == round(47.3977420 * 1e7)
-        return gin.fix_type, gin.horiz_accuracy
-
-    assert gps_input(5.0, NavMode.NORMAL) == (3, 5.0)  # not in a gap: as it is
-    assert gps_input(2.9, NavMode.BRIDGING) == (3, pytest.approx(2.9))
-    assert gps_input(3.1, NavMode.BRIDGING) == (1, pytest.approx(3.1))
-    assert gps_input(2.0, NavMode.BRIDGING)[0] == 1  # withdrawn until GNSS is back
-    assert gps_input(4.0, NavMode.REACQUIRING)[0] == 1
-    assert enc.held["gap_beyond_accuracy"] == 3
-    assert gps_input(0.5, NavMode.NORMAL)[0] == 3
-    assert gps_input(0.5, NavMode.BRIDGING)[0] == 3  # the next gap starts afresh
-    unlimited = Encoder(EncoderConfig(gap_max_h_acc_m=math.inf))
-    sol = dataclasses.replace(solution(sigma_ne=(50.0, 50.0)), mode=NavMode.BRIDGING)
-    assert unlimited.encode(sol, AutopilotFlavour.ARDUPILOT)[1].fix_type == 3

@@ -21,7 +21,6 @@ LIVE_KEYS = frozenset(
         "min_vel_acc_mps",
         "uere_m",
         "gps_input_yaw",
-        "gap_max_h_acc_m",
         "statustext_min_interval_s",
     }
 )
@@ -56,11 +55,6 @@ class EncoderConfig:
     """Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
     autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
     be a deliberate choice."""
-    gap_max_h_acc_m: float = ranged(3.0, gt=0.0, finite=False)
-    """Through a GNSS gap, GPS_INPUT says "no fix" once the bridged solution's horizontal
-    accuracy (1-sigma) exceeds this, m, until GNSS is trusted again: an autopilot fusing it
-    would follow a drifting solution with its own attitude and wind, and its own dead
-    reckoning serves it better from there. ``inf``: the whole gap is sent."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
     """Least time between two STATUSTEXTs of the same alert code, s (a change of state
     within a family, e.g. GNSS_BACK then GNSS_LOST, is always sent)."""

@@ -56,7 +56,6 @@ _CDEG_FULL = 36000
 _F64 = np.dtype(np.float64)
 # plain-int and module-level copies of enum members and units, for the per-solution path
 _FIX_3D = int(FixType.FIX_3D)
-_NO_FIX = int(FixType.NO_FIX)
 _RTK_FIXED = int(FixType.RTK_FIXED)
 _ARDUPILOT = AutopilotFlavour.ARDUPILOT
 _PX4 = AutopilotFlavour.PX4
@@ -150,9 +149,8 @@ class Encoder:
         self.suppressed: collections.Counter[str] = collections.Counter()
         self.dropped: collections.Counter[str] = collections.Counter()
         self.held: collections.Counter[str] = collections.Counter()
-        """Solutions held back from the autopilot, by reason: GLOBAL_POSITION_SENSORs not
-        sent to PX4 (``agp_id_unknown``, ``feedback_guard``), GPS_INPUTs sent as "no fix"
-        (``gap_beyond_accuracy``)."""
+        """GLOBAL_POSITION_SENSORs held back from PX4, by reason (``agp_id_unknown``,
+        ``feedback_guard``)."""
         self._gpi_cls = self._mod.MAVLink_global_position_int_message
         self._gps_input_cls = self._mod.MAVLink_gps_input_message
         self.agp_id: int | None = None
@@ -162,9 +160,6 @@ class Encoder:
         """PX4's id is not known yet (being read, or no autopilot yet): no
         GLOBAL_POSITION_SENSOR (one of another id would keep PX4 from fusing the right
         one). The pipeline holds from its start until it has read the id, or given up."""
-        self._gap_fed_out = False
-        """This gap's GPS_INPUTs say "no fix" from now until GNSS is trusted again
-        (``gap_max_h_acc_m``)."""
         self.feedback_guard = False
         """PX4 fuses what we send (``EKF2_AGP0_CTRL``): no GLOBAL_POSITION_SENSOR from a GNSS
         gap's start until GNSS is trusted again (:data:`FEEDBACK_HOLD_MODES`): bridged, our
@@ -358,14 +353,6 @@ class Encoder:
         h_acc = max(math.sqrt(max(h_lmax, 0.0)), cfg.min_h_acc_m)
         v_acc = max(math.sqrt(max(pc[2][2], 0.0)), cfg.min_v_acc_m)
         if kind == "gps_input":
-            fix_type = int(sol.fix_type) if sol.fix_type <= _RTK_FIXED else _FIX_3D
-            if sol.mode in FEEDBACK_HOLD_MODES:
-                if self._gap_fed_out or h_acc > cfg.gap_max_h_acc_m:
-                    self._gap_fed_out = True
-                    self.held["gap_beyond_accuracy"] += 1
-                    fix_type = _NO_FIX
-            else:
-                self._gap_fed_out = False
             s_acc = max(math.sqrt(max(largest_eigenvalue_3x3(vc), 0.0)), cfg.min_vel_acc_mps)
             if yaw_cd is None or not cfg.gps_input_yaw:
                 yaw_field = 0
@@ -381,7 +368,7 @@ class Encoder:
                         0,  # time_week_ms: no GPS time
                         0,  # time_week: 0 disables ArduPilot's jitter correction
                         # ArduPilot's GPS_Status stops at RTK fixed (6): STATIC/PPP go as 3D
-                        fix_type,
+                        int(sol.fix_type) if sol.fix_type <= _RTK_FIXED else _FIX_3D,
                         lat,
                         lon,
                         float(sol.alt_msl_m),

@@ -221,8 +221,9 @@ class BlendNavigator:
         instead (ATTITUDE's rates: its gyros less its own bias estimate). An autopilot that
         fuses what we publish corrects its attitude with it: taken back, errors would feed
         on themselves; its rates carry only its slowly moving gyro bias estimate. The
-        attitude error is then modelled as a strapdown's (from its error at that moment,
-        the rates' bias 1-sigma ``gyro_instability_radps``). ``False``: take the
+        attitude error is then modelled as a strapdown's, from its error at that moment,
+        the rates' bias variance how far the autopilot's attitude strayed from them before
+        (:attr:`rate_drift`) plus ``gyro_instability_radps`` squared. ``False``: take the
         autopilot's attitude again, its error restarting from ``att_err_sigma_rad``.
         Nothing changes in strapdown mode or on the blend's own alignment, which never
         take the autopilot's attitude.
