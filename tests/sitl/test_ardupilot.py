@@ -9,8 +9,8 @@ flight flown twice, once with the autopilot taking the service's solution as its
 while GPS 1 is lost, to compare the autopilot's own outage error. The lag as the
 autopilot stamps it is shorter (``SITL_GPS_LAG_MS``, measured in every flight): see the
 p95 test. The speed-up (``COMPANION_SITL_SPEEDUP``, default 5) changes only the wall
-time: every score is on the autopilot's clock against the simulator's truth. ``python bench/sitl.py`` flies the
-same scenarios longer and prints the figures.
+time: every score is on the autopilot's clock against the simulator's truth.
+``python bench/sitl.py`` flies the same scenarios longer and prints the figures.
 """
 
 from __future__ import annotations
