@@ -7,11 +7,14 @@ in ``../shared/sitl`` or ``$COMPANION_SITL_DIR``; nothing runs without them) and
 one table: per scenario, the horizontal error (mean / 95th percentile / max, m) of the
 service and of the autopilot's EKF3 against the simulator's truth over the healthy
 cruise and over the GPS outage, GNSS_LOST and GNSS_BACK latencies, and the alerts that
-should not be there. All times are the autopilot's; ``--speedup`` changes only the wall
-time.
+should not be there. Then the plane circuit again with the service feeding the
+autopilot (``--feed``: its GPS 2, taken while GPS 1 is lost), ``--feed-runs`` times: the
+autopilot's own error over the outage with the service and without it (the first
+flight). All times are the autopilot's; ``--speedup`` changes only the wall time.
 
     python bench/sitl.py                      # 5 min cruise, 30 s outage
     python bench/sitl.py --cruise-s 600 --speedup 3 --json out.json
+    python bench/sitl.py --feed-runs 3 --px4-runs 0
 """
 
 from __future__ import annotations
@@ -78,6 +81,29 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
         print(f"    {t:8.2f} s  {a}")
 
 
+def _print_fed(alone: dict[str, Any], feds: list[dict[str, Any]]) -> None:
+    span = alone["outage"]["t_on_s"] - alone["outage"]["t_off_s"]
+    print(
+        f"\nplane circuit, the autopilot's own error (EKF3) over the {span:.0f} s outage, "
+        "with the service feeding its GPS 2 and without"
+    )
+    print(f"  {'run':34s} {'autopilot EKF3':>22s} {'service':>22s}")
+    out = alone["outage"]
+    print(f"  {'alone (not fed)':34s} {_fmt(out['autopilot']):>22s} {_fmt(out['service']):>22s}")
+    for k, fed in enumerate(feds, 1):
+        out = fed["outage"]
+        label = f"fed, run {k}"
+        print(f"  {label:34s} {_fmt(out['autopilot']):>22s} {_fmt(out['service']):>22s}")
+        lag = fed.get("feed_lag_s")
+        print(
+            "    the autopilot's stamps of our fixes trail the truth by "
+            + ("-" if lag is None else f"{lag * 1000:.0f} ms")
+            + f"; the service beyond 2.45 x its published 1-sigma in "
+            f"{out['service_beyond_coverage']} of {out['service_with_accuracy']} positions; "
+            f"after GPS returns (+5 s on) EKF3 {_fmt(fed['after']['autopilot'])}"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--speedup", type=float, default=4.0)
@@ -89,6 +115,12 @@ def main(argv: list[str] | None = None) -> int:
         default='{"GPS1_DELAY_MS": 100}',
         help="autopilot parameters (JSON); default: the GPS lag set to SITL's 100 ms "
         "(SIM_GPS1_LAG_MS; the lag the autopilot's stamps really carry is printed per flight)",
+    )
+    p.add_argument(
+        "--feed-runs",
+        type=int,
+        default=1,
+        help="plane circuits with the service feeding the autopilot's GPS 2; 0: none",
     )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
     p.add_argument(
@@ -135,6 +167,8 @@ def main(argv: list[str] | None = None) -> int:
             ],
             "plane reboot": ["reboot", "--speedup", "1"],
         }
+        for k in range(args.feed_runs):
+            runs[f"plane circuit fed {k + 1}"] = [*runs["plane circuit"], "--feed"]
         for name, run_args in runs.items():
             out = Path(tmp) / f"{name.replace(' ', '_')}.json"
             timeout_s = 120.0 + 3.0 * (args.cruise_s + args.outage_s + args.after_s + 120.0)
@@ -143,6 +177,9 @@ def main(argv: list[str] | None = None) -> int:
     print("horizontal error vs SITL truth, m: mean / p95 / max")
     for name in ("plane circuit", "copter circuit"):
         _print_flight(name, results[name])
+    feds = [results[f"plane circuit fed {k + 1}"] for k in range(args.feed_runs)]
+    if feds:
+        _print_fed(results["plane circuit"], feds)
     for event in results["plane reboot"]["events"]:
         delay = event["resume_delay_s"]
         print(

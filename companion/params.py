@@ -376,6 +376,10 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("RAW_STATUS_RATE", "raw.status_rate_hz"),
     # [blend], added later
     ("BLD_GYR_MEASURED", "blend.gyro_noise_measured"),
+    ("BLD_GYR_INSTAB", "blend.gyro_instability_radps"),
+    ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
+    ("ENG_GAP_ATT", "engine.gap_attitude"),
+    ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
@@ -390,6 +394,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "encoder.output": ("auto", "gps_input", "global_position_sensor"),
     "raw.receiver_port": ("UART1", "UART2", "USB", "SPI", "I2C"),
     "raw.bands": ("all", "l1"),
+    "engine.gap_attitude": ("auto", "autopilot", "rates"),
 }
 """Keys holding one of a fixed set of words: the parameter is the word's index here
 (pinned: a new word is appended)."""

@@ -341,6 +341,9 @@ class Pipeline:
         injected = (
             instance if feeds and instance is not None and encoder.gps_id == instance else None
         )
+        # the autopilot may fuse what we publish: through a gap, its attitude would be
+        # built on our own output (the engine's gap_attitude)
+        self.engine.autopilot_fuses_output = injected is not None
         if injected != gnss.injected_receiver:
             gnss.injected_receiver = injected
             if injected is not None:

@@ -12,6 +12,8 @@ from companion.ranges import check_ranges, ranged
 
 NAVIGATORS = ("blend", "singer", "passthrough")
 """The navigators :attr:`EngineConfig.navigator` chooses from."""
+GAP_ATTITUDES = ("auto", "autopilot", "rates")
+"""The choices of :attr:`EngineConfig.gap_attitude`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,6 +54,20 @@ class EngineConfig:
     imu_rate_hold_s: float = ranged(5.0, ge=0.0)
     """The IMU counts as usable again only after its rate has held this long (and after
     an IMU timeout): no flapping between navigators."""
+    gap_attitude: str = ranged("auto", choices=GAP_ATTITUDES)
+    """What carries the blend's attitude through a GNSS gap: 'autopilot' (its attitude,
+    as outside gaps), 'rates' (from the gap's start, the autopilot's body rates: its
+    gyros less its own bias estimate, not its attitude's corrections) or 'auto': the rates
+    while the autopilot may fuse what the service publishes (a GPS of type MAV taking our
+    GPS_INPUT), whose attitude through the gap is then corrected by our own output (also
+    after ``gap_feed_max_h_acc_m``: what it fused stays in it), else its attitude."""
+    gap_feed_max_h_acc_m: float = ranged(3.0, gt=0.0, finite=False)
+    """When the autopilot may fuse what the service publishes: through a GNSS gap the
+    solution is published as "no fix" (GPS_INPUT ``fix_type`` 1; GLOBAL_POSITION_INT is
+    unchanged) once its horizontal accuracy (1-sigma) exceeds this, m, until GNSS is
+    trusted again. Fed to the end, the autopilot follows a slowly drifting solution with
+    its own attitude and wind; from there its own dead reckoning serves it better.
+    ``inf``: the whole gap is fed."""
     primary_receiver: int = ranged(0, choices=(0, 1))
     """The receiver fused normally; the other is fused only while this one is unusable
     (and is always the integrity monitor's independent solution)."""

@@ -78,6 +78,7 @@ from companion.types import (
     LandedState,
     LandedStateSample,
     NavMode,
+    NavSolution,
     Output,
     RawSolution,
     RebootEvent,
@@ -179,6 +180,14 @@ class Engine:
         to fall back to; made at each boot by :meth:`_reset`)."""
         self.state_changes = 0
         """Incremented whenever :meth:`persistent_state` changes (drivers persist it)."""
+        self.autopilot_fuses_output = False
+        """The autopilot may fuse what we publish (set by the pipeline from its parameters:
+        a GPS of type MAV taking our GPS_INPUT). With ``gap_attitude = "auto"`` the blend's
+        attitude is then carried by the autopilot's body rates through a GNSS gap, not
+        taken from its attitude (:meth:`BlendNavigator.hold_attitude`), and the solution is
+        withdrawn from it past ``gap_feed_max_h_acc_m``."""
+        self._feed_withdrawn = False
+        """This gap's solutions go to the autopilot as "no fix" (``gap_feed_max_h_acc_m``)."""
         self._pending_state: dict[str, object] | None = None
         self._grade_widened = False
         """The IMU's measured noise exceeded its configured grade: the references are off
@@ -498,6 +507,14 @@ class Engine:
         return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
+        gap_attitude = self.config.gap_attitude
+        if gap_attitude != "autopilot":
+            # through a gap, an autopilot fusing our output corrects its attitude with it
+            # (and after the fix is withdrawn, that attitude still carries it)
+            self.navigators.hold_attitude(
+                self.outage.mode in OUTAGE_MODES
+                and (gap_attitude == "rates" or self.autopilot_fuses_output)
+            )
         self._yaw_rad = sample.yaw_rad
         self._attitude = sample
         self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?
@@ -909,8 +926,28 @@ class Engine:
         outputs = self.publisher.publish(
             t_s, state, self.frame, self.heading, self._yaw_rad, self._landed
         )
+        if self.autopilot_fuses_output:
+            outputs[0] = self._feed_or_withdraw(outputs[0])
         self.stats.solutions += 1
         return outputs
+
+    def _feed_or_withdraw(self, out: Output) -> Output:
+        """Through a gap, the solution for an autopilot that fuses it: "no fix" once its
+        horizontal accuracy has passed ``gap_feed_max_h_acc_m``, until GNSS is trusted."""
+        if not isinstance(out, NavSolution):
+            return out
+        if self.outage.mode not in OUTAGE_MODES:
+            self._feed_withdrawn = False
+            return out
+        if not self._feed_withdrawn and out.h_acc_m > self.config.gap_feed_max_h_acc_m:
+            self._feed_withdrawn = True
+            self.stats.gnss["gap_feed_withdrawn"] += 1
+            log.info(
+                "t=%.2f s: the autopilot's fix withdrawn (%.1f m 1-sigma)", out.t_s, out.h_acc_m
+            )
+        if self._feed_withdrawn and out.fix_type is not FixType.NO_FIX:
+            return dataclasses.replace(out, fix_type=FixType.NO_FIX)
+        return out
 
     # ------------------------------------------------------------------ frame and references
 

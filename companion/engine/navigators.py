@@ -180,6 +180,13 @@ class Navigators:
         primary.on_attitude(sample, yaw_correction_rad)
         return True
 
+    def hold_attitude(self, hold: bool) -> None:
+        """Hold the autopilot's attitude out of the blend (its body rates carry the blend's),
+        or take it again (:meth:`BlendNavigator.hold_attitude`)."""
+        primary = self.primary
+        if isinstance(primary, BlendNavigator) and primary.attitude_held is not hold:
+            primary.hold_attitude(hold)
+
     def select(self, now_s: float | None) -> None:
         """The blend carries the solution while it runs on a live, usable IMU stream."""
         primary = self.primary

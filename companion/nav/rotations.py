@@ -125,6 +125,24 @@ def rotate_by_rotvec(q: Quat, rx: float, ry: float, rz: float) -> Quat:
     return (w / n, x / n, y / n, z / n)
 
 
+def rotvec_between(q_from: Quat, q_to: Quat) -> Vec3:
+    """The rotation vector (rad) of ``conj(q_from) * q_to``: the turn, in ``q_from``'s own
+    frame (the body for ``q_nb``), that takes ``q_from`` to ``q_to`` (the shorter way)."""
+    aw, ax, ay, az = q_from
+    bw, bx, by, bz = q_to
+    w = aw * bw + ax * bx + ay * by + az * bz
+    x = aw * bx - ax * bw - ay * bz + az * by
+    y = aw * by + ax * bz - ay * bw - az * bx
+    z = aw * bz - ax * by + ay * bx - az * bw
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    s = math.sqrt(x * x + y * y + z * z)
+    if s < 1e-12:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    k = 2.0 * math.atan2(s, w) / s
+    return (k * x, k * y, k * z)
+
+
 # ---------------------------------------------------------------------------- matrices
 
 

@@ -87,8 +87,10 @@ def test_gps_id_from_gps2_type_and_own_echo_ignored() -> None:
     p, _ = _started()
     assert p.encoder.gps_id == 0
     p.on_message(_param("GPS1_TYPE", 1.0), 0.1)
+    assert not p.engine.autopilot_fuses_output
     p.on_message(_param("GPS2_TYPE", 14.0), 0.1)
     assert p.encoder.gps_id == 1
+    assert p.engine.autopilot_fuses_output  # its attitude through a gap is built on ours
     p.on_message(AP.parsed(_gps2_raw(10_100_000)), 0.2)
     assert p.decoder.rejections["own_injection"] == 1
     p.on_message(AP.parsed(gps_raw(10_100_000)), 0.2)  # GPS 1 is still a receiver
@@ -123,6 +125,7 @@ def test_gps_id_from_autopilot_turned_off_live() -> None:
     p.reconfigure(dataclasses.replace(p.config, encoder=encoder))
     assert p.encoder.gps_id == 0  # the configured id again
     assert p.decoder.gnss.injected_receiver is None  # GPS 2 is no longer fed by us
+    assert not p.engine.autopilot_fuses_output
 
 
 def test_streams_requested_on_a_heartbeat_before_any_time() -> None:

@@ -538,3 +538,51 @@ def test_consistent_on_project_simulator_approach() -> None:
     lo, hi = chi2.ppf([0.025, 0.975], 6 * n) / n
     assert lo < np.mean(all_nees) < hi, (lo, np.mean(all_nees), hi)
     assert 0.95 < nis_sum / dof_sum < 1.05, nis_sum / dof_sum
+
+
+def test_held_attitude_bridges_on_the_rates_with_an_honest_covariance() -> None:
+    """An autopilot fusing our output tilts its attitude with it: held out through the gap
+    (``hold_attitude``), the blend integrates the reported body rates, the position error
+    stays small and within its covariance; taken, the same attitude drags it off."""
+    spec = SimSpec(duration_s=50.0, outage=(25.0, 45.0))
+    sim = simulate(spec, 5)
+    tilt = np.radians([1.0, -1.0, 0.0])
+
+    def fly(hold: bool) -> tuple[float, float]:
+        nav = BlendNavigator(config_for(spec, mode="attitude_aided", adaptive=False), FRAME)
+        worst, worst_nees = 0.0, 0.0
+        for s in sim.samples:
+            in_gap = 25.5 <= s.t_s < 45.0
+            if hold:
+                nav.hold_attitude(in_gap)
+            if isinstance(s, AttitudeSample):
+                if in_gap:  # the autopilot's attitude, tilted by what it fused
+                    s = AttitudeSample(
+                        s.t_s,
+                        s.t_rx_s,
+                        s.roll_rad + tilt[0],
+                        s.pitch_rad + tilt[1],
+                        s.yaw_rad,
+                        s.rate_b_radps,
+                    )
+                nav.on_attitude(s, 0.0)
+            elif isinstance(s, ImuSample):
+                nav.on_imu(s)
+                if in_gap and nav.initialised:
+                    st = nav.predict(s.t_s)
+                    assert st is not None
+                    err = st.pos_ned_m - spec.traj.pos(s.t_s)
+                    worst = max(worst, float(np.hypot(err[0], err[1])))
+                    worst_nees = max(
+                        worst_nees, float(err @ np.linalg.solve(st.pos_cov_ned_m2, err))
+                    )
+            else:
+                nav.on_gnss(s)
+        assert not nav.attitude_held  # taken again after the gap
+        return worst, worst_nees
+
+    held_err, held_nees = fly(hold=True)
+    taken_err, _ = fly(hold=False)
+    assert held_err < 1.0
+    assert held_nees < chi2.ppf(0.999, 3)
+    assert taken_err > 20.0 * held_err

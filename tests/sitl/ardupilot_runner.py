@@ -9,7 +9,11 @@ Scenarios:
   loses GPS 1 (``SIM_GPS1_ENABLE = 0``) for that long and flies ``--after-s`` more.
   Scored from SITL's DataFlash log: the service's and the autopilot's (POS, EKF3)
   horizontal errors against the simulator's truth (SIM) over the healthy cruise and over
-  the outage, and the service's alerts with their times.
+  the outage, and the service's alerts with their times. ``--feed``: the autopilot takes
+  the service's GPS_INPUT as its GPS 2 and switches to it while GPS 1 has no 3-D fix
+  (:data:`FEED_PARAMS`); the result then also says how far the autopilot's stamps of our
+  fixes trail the truth and how often the service's error exceeded 2.45 times its
+  published accuracy over the outage.
 * ``reboot``: on the ground, the autopilot is rebooted (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN),
   then SITL is killed and started again; the service keeps running. Result: how long
   after the autopilot is back (its first HEARTBEAT) the service publishes again, on the
@@ -24,6 +28,7 @@ Scenarios:
 from __future__ import annotations
 
 import argparse
+import bisect
 import collections
 import json
 import math
@@ -37,7 +42,14 @@ from typing import Any
 from pymavlink import mavutil
 
 from tests.sitl import harness
-from tests.sitl.dataflash import SitlLog, Track, newest_log, read_gps_raw, read_log
+from tests.sitl.dataflash import (
+    SitlLog,
+    Track,
+    newest_log,
+    read_gps_instance,
+    read_gps_raw,
+    read_log,
+)
 from tests.sitl.harness import GroundStation, Processes, ServiceTap
 
 MAV = mavutil.mavlink
@@ -47,6 +59,24 @@ COPTER_AUTO, COPTER_GUIDED = 3, 4
 COPTER_ALT_M = 25.0
 HOME_LAT, HOME_LON, HOME_ALT = -35.363261, 149.165230, 584.0
 CRUISE_ALT_M = 80.0
+FEED_LAG_MS = 30
+"""``GPS2_DELAY_MS`` for the service's GPS_INPUT: it carries its solution to the newest
+autopilot time it has, so the lag is the link's and its own processing (measured against
+the truth: 30-36 ms of autopilot time at speed-up 5, ``feed_lag_s`` in the result)."""
+FEED_PARAMS = {
+    "GPS2_TYPE": 14,
+    "GPS_AUTO_SWITCH": 4,
+    "GPS_PRIMARY": 0,
+    "GPS2_DELAY_MS": FEED_LAG_MS,
+}
+"""The autopilot fed by the service (``--feed``): GPS 2 is MAVLink (GPS_INPUT), and the
+GPS in use is GPS 1 whenever it has a 3-D fix, else the best of the others
+(``GPS_AUTO_SWITCH = 4``, AP_GPS::update_primary): EKF3 takes the service's solution only
+while its own GPS is lost, never what the service derived from that GPS while it was
+good (``UseBest``, 1, would keep whichever had more satellites; blending, 2, would mix
+them in weighted by the reported accuracies)."""
+COVERAGE_K = 2.45
+"""95 % of a circular 2-D normal error lies within 2.45 sigma."""
 ALERT_CODES = (
     "GNSS_LOST",
     "GNSS_BACK",
@@ -129,6 +159,18 @@ def _alerts_in(tap: ServiceTap, t0: float, t1: float) -> list[tuple[float, str]]
     return [(t, a) for t, a in tap.alerts if t0 <= t <= t1]
 
 
+def _timed_errors(
+    log: SitlLog, track: Track, t0: float, t1: float
+) -> tuple[list[float], list[float]]:
+    """Times and horizontal errors against the truth of the points of ``track`` in [t0, t1]."""
+    times, errors = [], []
+    for t, lat, lon in zip(track.t_s, track.lat_deg, track.lon_deg, strict=True):
+        if t0 <= t <= t1 and (ref := log.truth.at(t)) is not None:
+            times.append(t)
+            errors.append(harness.horizontal_m(ref[0], ref[1], lat, lon))
+    return times, errors
+
+
 def score_flight(
     log: SitlLog, tap: ServiceTap, t_cruise_s: float, t_end_s: float, outage: bool
 ) -> dict[str, Any]:
@@ -170,6 +212,17 @@ def score_flight(
             "gnss_back_latency_s": (back[0] - t_on) if back else None,
             "alerts": _alerts_in(tap, t_off - 1.0, t_end_s),
         }
+        # each error against the accuracy published last at or before it
+        acc_t = [t for t, _ in tap.accuracies]
+        acc_m = [h for _, h in tap.accuracies]
+        errs = [
+            (e, acc_m[i - 1])
+            for t, e in zip(*_timed_errors(log, service, t_off, t_on), strict=True)
+            if (i := bisect.bisect_right(acc_t, t)) > 0
+        ]
+        out["outage"]["service_h_acc_m_max"] = max((h for _, h in errs), default=None)
+        out["outage"]["service_beyond_coverage"] = sum(e > COVERAGE_K * h for e, h in errs)
+        out["outage"]["service_with_accuracy"] = len(errs)
         out["after"] = {
             "service": _stats(log.errors(service, t_on + 5.0, t_end_s)),
             "autopilot": _stats(log.errors(log.autopilot, t_on + 5.0, t_end_s)),
@@ -188,7 +241,8 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         gcs.set_message_rate("GLOBAL_POSITION_INT", 5.0)
         gcs.set_param("LOG_DISARMED", 1)
         gcs.set_param("SIM_GPS1_ENABLE", 1)
-        for name, value in json.loads(args.params).items():
+        params = {**(FEED_PARAMS if args.feed else {}), **json.loads(args.params)}
+        for name, value in params.items():
             gcs.set_param(name, float(value))
 
         def rel_alt() -> float:
@@ -226,13 +280,19 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         procs.stop("companion")
         procs.stop("sitl")
         tap.close()
-    log = read_log(newest_log(procs.workdir))
+    log_path = newest_log(procs.workdir)
+    log = read_log(log_path)
     result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0)
     # how far GPS_RAW_INT's time_usec trails the fix's time of validity: what GPS1_DELAY_MS
     # should be (the simulator's SIM_GPS1_LAG_MS is not that lag as the autopilot stamps it)
     tlogs = sorted((procs.workdir / "companion-logs").glob("*.tlog"))
     result["gps_lag_s"] = (
         log.lag_s(read_gps_raw(tlogs[0]), t_cruise, result["healthy"]["t1_s"]) if tlogs else None
+    )
+    result["feed_lag_s"] = (
+        log.lag_s(read_gps_instance(log_path, 1), t_cruise, result["healthy"]["t1_s"])
+        if args.feed
+        else None
     )
     result["t_armed_s"] = t_armed
     result["service_messages"] = dict(tap.counts)
@@ -390,6 +450,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--after-s", type=float, default=30.0)
     p.add_argument("--throttle-pwm", type=int, default=1350, help="taxi: RC 3 override")
     p.add_argument("--params", default="{}", help="autopilot parameters to set (JSON)")
+    p.add_argument(
+        "--feed",
+        action="store_true",
+        help="the autopilot takes the service's GPS_INPUT as GPS 2 while GPS 1 is lost",
+    )
     p.add_argument("--config", default="", help="service configuration sections (JSON)")
     p.add_argument("--keep", type=Path, help="work in this folder and keep it")
     args = p.parse_args(argv)

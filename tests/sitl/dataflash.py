@@ -104,6 +104,21 @@ def read_gps_raw(tlog: Path) -> Track:
     return track
 
 
+def read_gps_instance(path: Path, instance: int) -> Track:
+    """The distinct 3-D fixes of the autopilot's GPS ``instance`` (0, 1) from its DataFlash
+    ``GPS`` records, each at the time it was logged (just after the autopilot took it)."""
+    reader = DFReader.DFReader_binary(str(path), zero_time_base=True)
+    track, last = Track(), None
+    while (m := reader.recv_match(type="GPS")) is not None:
+        if m.I != instance or m.Status < 3:
+            continue
+        key = (m.GMS, m.Lat, m.Lng)
+        if key != last:
+            last = key
+            track.append(m.TimeUS * 1e-6, m.Lat, m.Lng)
+    return track
+
+
 def read_log(path: Path) -> SitlLog:
     reader = DFReader.DFReader_binary(str(path), zero_time_base=True)
     truth, ap = Track(), Track()

@@ -48,6 +48,14 @@ class BlendConfig:
     """Gyro bias 1-sigma, rad/s."""
     gyro_bias_tau_s: float = ranged(3600.0, gt=0.0, finite=False)
     """Gyro bias correlation time, s."""
+    gyro_instability_radps: float = ranged(10.0 * _DEG / _HOUR_S, gt=0.0)
+    """Gyro bias instability 1-sigma, rad/s: the uncertainty of the autopilot's own gyro
+    bias estimate when its body rates carry the attitude through a gap
+    (:meth:`~companion.nav.blend.BlendNavigator.hold_attitude`)."""
+    rate_drift_window_s: float = ranged(60.0, gt=0.0)
+    """Time constant over which the autopilot's attitude is compared with its own body
+    rates, s: how far it strays from them bounds their bias when they carry the attitude
+    through a gap (:mod:`companion.nav.blend.rate_drift`)."""
     att_err_sigma_rad: tuple[float, float, float] = ranged(
         (0.1 * _DEG, 0.1 * _DEG, 0.5 * _DEG), gt=0.0, length=3
     )
@@ -142,6 +150,7 @@ class BlendConfig:
             gyro_arw_rad_rts=g.gyro_noise_density_radps_rthz,
             accel_bias_sigma_mps2=g.acc_bias_sigma_mps2,
             gyro_bias_sigma_radps=g.gyro_bias_sigma_radps,
+            gyro_instability_radps=g.gyro_instability_radps,
         )
         params.update(overrides)
         return cls(**params)  # type: ignore[arg-type]

@@ -74,6 +74,7 @@ class ErrorModel:
 
     def __init__(self, config: BlendConfig) -> None:
         cfg = config
+        self._cfg = cfg
         self._strapdown = cfg.mode == "strapdown"
         self._van_loan = cfg.cov_discretisation == "van_loan"
         self._gqg_static = self._static_gqg(cfg)
@@ -96,6 +97,26 @@ class ErrorModel:
         self._gb_tau_s = 300.0
         self.gqg = self._make_gqg()
         """Diagonal (18,) of the continuous noise intensity G Qc G^T in use."""
+
+    def set_strapdown(self, strapdown: bool) -> None:
+        """Model the attitude error as a strapdown's (gyro noise and bias, ``True``) or as
+        the autopilot's attitude error (Gauss-Markov, ``False``) from now on; the
+        accelerometer PSD and the receiver-error block are kept."""
+        if strapdown is self._strapdown:
+            return
+        cfg = self._cfg
+        self._strapdown = strapdown
+        self._gqg_static = self._static_gqg(cfg)
+        self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
+            np.zeros(3),
+            np.zeros((3, 3)),
+            strapdown=strapdown,
+            tau_att_s=cfg.att_err_tau_s,
+            tau_ba_s=cfg.accel_bias_tau_s,
+            tau_bg_s=cfg.gyro_bias_tau_s,
+        )
+        self._f_idx = _flat_index(_F_VARIABLE_ENTRIES + (_F_STRAPDOWN_ENTRIES if strapdown else []))
+        self.gqg = self._make_gqg()
 
     def _static_gqg(self, cfg: BlendConfig) -> FloatArray:
         """The configuration's part of ``gqg`` (attitude and bias noises), (18,)."""

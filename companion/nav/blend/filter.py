@@ -31,6 +31,7 @@ from companion.nav.blend.history import (
     state_at,
 )
 from companion.nav.blend.measurement import GnssModel
+from companion.nav.blend.rate_drift import RateDrift
 from companion.nav.blend.receiver import ReceiverError
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.imu_check import ImuNoiseCheck, ImuNoiseVerdict
@@ -97,6 +98,10 @@ class BlendNavigator:
         """The gyro's measured white noise (kept across restarts: it is the IMU's)."""
         self._gyro_psd_measured: float | None = None
         """Gyro PSD measured above the configured one (rad^2/s), None while it is not."""
+        self.rate_drift = RateDrift(cfg.rate_drift_window_s)
+        """How far the autopilot's attitude strays from its body rates (kept across
+        restarts: it is the autopilot's)."""
+        self._rate_drift_yaw_corr = math.nan
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -116,6 +121,13 @@ class BlendNavigator:
             self._aligner.seed(seed)
         self._strapdown = self.config.mode == "strapdown"
         self._own_attitude = False
+        self.attitude_held = False
+        """The autopilot's attitude is not taken: its body rates carry ours
+        (:meth:`hold_attitude`)."""
+        self._held_rates: list[tuple[float, list[float]]] = []
+        """While held: the autopilot's two latest body rates ``(t_s, rad/s)``, integrated
+        instead of the IMU's gyros."""
+        self._bg_before_hold: list[float] | None = None
         self._model = ErrorModel(self.config)
         self._model.set_gyro_psd(self._gyro_psd_measured)
         self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
@@ -157,6 +169,8 @@ class BlendNavigator:
             verdict = meter.on_imu(sample)
             if verdict is not None:
                 self._follow_gyro_noise(verdict)
+        if self._held_rates:
+            gyro_t = held_rate_at(self._held_rates, sample.t_s)
         mech = self._mech
         if not self._init:
             if self._pre_imu and sample.t_s <= self._pre_imu[-1][0]:
@@ -219,12 +233,68 @@ class BlendNavigator:
             snap.q_nb = rotate_by_rotvec(snap.q_nb, 0.0, 0.0, turn)
         log.info("heading restarted from the taxi correction: turned %.3f deg", math.degrees(turn))
 
+    def hold_attitude(self, hold: bool) -> None:
+        """``hold``: stop taking the autopilot's attitude and integrate its body rates
+        instead (ATTITUDE's rates: its gyros less its own bias estimate). An autopilot that
+        fuses what we publish corrects its attitude with it: taken back, errors would feed
+        on themselves; its rates carry only its slowly moving gyro bias estimate. The
+        attitude error is then modelled as a strapdown's, from its error at that moment,
+        the rates' bias variance how far the autopilot's attitude strayed from them before
+        (:attr:`rate_drift`) plus ``gyro_instability_radps`` squared. ``False``: take the
+        autopilot's attitude again, its error restarting from ``att_err_sigma_rad``.
+        Nothing changes in strapdown mode or on the blend's own alignment, which never
+        take the autopilot's attitude.
+
+        The IMU's own gyros are not used for this: ArduPilot sends them in whole mrad/s,
+        truncated toward zero (RAW_IMU, SCALED_IMU), a bias of 0.5 mrad/s that changes sign
+        with the rate: carried on them, SITL's attitude drifted by about a degree in 30 s.
+        """
+        if hold is self.attitude_held:
+            return
+        self.attitude_held = hold
+        if self.config.mode == "strapdown" or self._own_attitude:
+            return
+        self._strapdown = hold
+        self._model.set_strapdown(hold)
+        if not self._init:
+            return
+        p = self._p
+        mech = self._mech
+        if hold:
+            # the autopilot's body rates (its gyros less its own bias estimate) carry the
+            # attitude: not its attitude, which its fusion of our output corrects
+            self._bg_before_hold = list(mech.bg)
+            mech.bg = [0.0, 0.0, 0.0]
+            p[12:15, :] = 0.0
+            p[:, 12:15] = 0.0
+            var = self.rate_drift.bias_variance() or [0.0, 0.0, 0.0]
+            floor = self.config.gyro_instability_radps**2
+            p[12:15, 12:15] = np.diag([v + floor for v in var])
+            log.info(
+                "autopilot attitude held out: its body rates carry ours (their bias 1-sigma "
+                "%s deg/s)",
+                [round(math.degrees(math.sqrt(v + floor)), 4) for v in var],
+            )
+        else:
+            self._held_rates = []
+            if self._bg_before_hold is not None:
+                mech.bg = self._bg_before_hold
+                self._bg_before_hold = None
+            p[6:9, :] = 0.0
+            p[:, 6:9] = 0.0
+            p[6:9, 6:9] = np.diag(np.square(self.config.att_err_sigma_rad))
+            p[12:15, :] = 0.0
+            p[:, 12:15] = 0.0
+            p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
+            log.info("autopilot attitude taken again")
+
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """Take the autopilot's attitude (yaw less ``yaw_correction_rad``).
 
         Attitude-aided mode: it replaces the attitude (after the filter's own
-        estimated correction), carried by the gyro to the newest IMU time.
-        Strapdown mode: used only to initialise.
+        estimated correction), carried by the gyro to the newest IMU time, and is compared
+        with its body rates (:attr:`rate_drift`); while held (:meth:`hold_attitude`) only
+        its body rates are kept. Strapdown mode: used only to initialise.
         """
         roll, pitch, yaw = sample.roll_rad, sample.pitch_rad, sample.yaw_rad
         isfinite = math.isfinite
@@ -235,6 +305,20 @@ class BlendNavigator:
             return
         self._att_q = euler_to_quat_values(roll, pitch, yaw - yaw_correction_rad)
         self._att_t_s = sample.t_s
+        rates = sample.rate_b_radps.tolist()
+        if len(rates) == 3 and math.isfinite(sum(rates)):
+            if not self.attitude_held:
+                if yaw_correction_rad != self._rate_drift_yaw_corr:
+                    self._rate_drift_yaw_corr = yaw_correction_rad
+                    self.rate_drift.restart()
+                self.rate_drift.on_sample(sample.t_s, self._att_q, rates)
+            elif self._strapdown and not self._own_attitude:
+                held = self._held_rates
+                if held and sample.t_s <= held[-1][0]:
+                    held.clear()  # out of order, or a new clock: start again
+                held.append((sample.t_s, rates))
+                if len(held) > 2:
+                    del held[0]
         if self._init and not self._strapdown:
             mech = self._mech
             q_used = quat_mul(self._att_corr, self._att_q)
@@ -736,3 +820,20 @@ class BlendNavigator:
         )
         gate3 = self._gates[3]
         return GnssUpdate(meas.t_s, True, 0.0, 3, gate3, np.zeros(3), np.diag(r_pos), "init")
+
+
+def held_rate_at(rates: list[tuple[float, list[float]]], t_s: float) -> list[float]:
+    """The body rate (rad/s) at ``t_s`` from the autopilot's latest one or two
+    ``(t_s, rates)``: linear between or beyond them, no further beyond the newest than
+    they are apart (a rate sampled at 25 Hz and held until the next would carry the
+    attitude late by half a sample interval, and through a roll into a turn keep it late
+    by that rotation for the whole turn)."""
+    t_b, w_b = rates[-1]
+    if len(rates) < 2:
+        return w_b
+    t_a, w_a = rates[0]
+    span = t_b - t_a
+    if span <= 0.0:
+        return w_b
+    k = min(t_s - t_b, span) / span
+    return [w_b[i] + (w_b[i] - w_a[i]) * k for i in range(3)]
