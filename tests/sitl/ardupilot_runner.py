@@ -89,58 +89,70 @@ ALERT_CODES = (
 )
 
 
-def plane_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, float]]:
+MissionItem = tuple[int, int, tuple[float, ...], float, float, float]
+"""(frame, command, params 1-4, lat deg, lon deg, alt m) of one mission item."""
+
+
+def _circuit(
+    takeoff: MissionItem, corners_ne_m: list[tuple[float, float]], alt_m: float
+) -> list[MissionItem]:
+    """Home, ``takeoff``, the corners (north, east of home, m; ``alt_m`` above it) and a
+    DO_JUMP back to the first corner: the rectangle flown in a loop."""
+    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    home = (
+        MAV.MAV_FRAME_GLOBAL,
+        MAV.MAV_CMD_NAV_WAYPOINT,
+        (0, 0, 0, 0),
+        HOME_LAT,
+        HOME_LON,
+        HOME_ALT,
+    )
+    items: list[MissionItem] = [home, takeoff]
+    for n, e in corners_ne_m:
+        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
+        items.append((rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, alt_m))
+    items.append((rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0))
+    return items
+
+
+def plane_circuit() -> list[MissionItem]:
     """Home, a take-off along the runway (353 deg) and a 900 x 600 m rectangle flown in a
     loop (DO_JUMP back to its first corner)."""
-    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-
-    def corner(n: float, e: float) -> tuple[int, int, tuple[float, ...], float, float, float]:
-        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
-        return (rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, CRUISE_ALT_M)
-
     tk_lat, tk_lon = harness.offset_deg(HOME_LAT, HOME_LON, 300, -40)
-    return [
-        (
-            MAV.MAV_FRAME_GLOBAL,
-            MAV.MAV_CMD_NAV_WAYPOINT,
-            (0, 0, 0, 0),
-            HOME_LAT,
-            HOME_LON,
-            HOME_ALT,
-        ),
-        (rel, MAV.MAV_CMD_NAV_TAKEOFF, (15, 0, 0, 0), tk_lat, tk_lon, 40.0),
-        corner(700, -80),
-        corner(700, 520),
-        corner(-200, 520),
-        corner(-200, -80),
-        (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
-    ]
+    takeoff = (
+        MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        MAV.MAV_CMD_NAV_TAKEOFF,
+        (15, 0, 0, 0),
+        tk_lat,
+        tk_lon,
+        40.0,
+    )
+    return _circuit(takeoff, [(700, -80), (700, 520), (-200, 520), (-200, -80)], CRUISE_ALT_M)
 
 
-def copter_circuit() -> list[tuple[int, int, tuple[float, ...], float, float, float]]:
+def copter_circuit() -> list[MissionItem]:
     """Home, a take-off to 25 m and a 200 x 120 m rectangle flown in a loop."""
-    rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+    takeoff = (
+        MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        MAV.MAV_CMD_NAV_TAKEOFF,
+        (0, 0, 0, 0),
+        HOME_LAT,
+        HOME_LON,
+        COPTER_ALT_M,
+    )
+    return _circuit(takeoff, [(100, 0), (100, 120), (-100, 120), (-100, 0)], COPTER_ALT_M)
 
-    def corner(n: float, e: float) -> tuple[int, int, tuple[float, ...], float, float, float]:
-        lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
-        return (rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, COPTER_ALT_M)
 
-    return [
-        (
-            MAV.MAV_FRAME_GLOBAL,
-            MAV.MAV_CMD_NAV_WAYPOINT,
-            (0, 0, 0, 0),
-            HOME_LAT,
-            HOME_LON,
-            HOME_ALT,
-        ),
-        (rel, MAV.MAV_CMD_NAV_TAKEOFF, (0, 0, 0, 0), HOME_LAT, HOME_LON, COPTER_ALT_M),
-        corner(100, 0),
-        corner(100, 120),
-        corner(-100, 120),
-        corner(-100, 0),
-        (rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0),
-    ]
+def _start(
+    procs: Processes, vehicle: str, args: argparse.Namespace
+) -> tuple[ServiceTap, GroundStation]:
+    """The autopilot, the service (``--config``) and a ground station, started in this
+    namespace; the tap listening to what the service sends."""
+    tap = ServiceTap()
+    harness.start_ardupilot(procs, vehicle, args.speedup)
+    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
+    harness.start_companion(procs, config)
+    return tap, GroundStation()
 
 
 def _stats(errors: list[float]) -> dict[str, float | int | None]:
@@ -231,11 +243,7 @@ def score_flight(
 
 
 def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
-    tap = ServiceTap()
-    harness.start_ardupilot(procs, args.vehicle, args.speedup)
-    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
-    harness.start_companion(procs, config)
-    gcs = GroundStation()
+    tap, gcs = _start(procs, args.vehicle, args)
     try:
         gcs.wait_booted()
         gcs.set_message_rate("GLOBAL_POSITION_INT", 5.0)
@@ -308,11 +316,7 @@ def taxi(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
     """ArduPlane rolls along the runway in FBWA (``GROUND_STEER_ALT`` = 5, throttle by RC
     override) for ``--cruise-s``: the service's heading alerts and the landed states the
     autopilot reported."""
-    tap = ServiceTap()
-    harness.start_ardupilot(procs, "plane", args.speedup)
-    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
-    harness.start_companion(procs, config)
-    gcs = GroundStation()
+    tap, gcs = _start(procs, "plane", args)
     landed: collections.Counter[int] = collections.Counter()
     speeds: list[float] = []
     try:
@@ -367,11 +371,7 @@ def taxi(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
 
 
 def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
-    tap = ServiceTap()
-    harness.start_ardupilot(procs, "plane", args.speedup)
-    config: dict[str, dict[str, Any]] = json.loads(args.config) if args.config else {}
-    harness.start_companion(procs, config)
-    gcs = GroundStation()
+    tap, gcs = _start(procs, "plane", args)
     out: dict[str, Any] = {"events": []}
     try:
         gcs.wait_booted()

@@ -40,23 +40,44 @@ def _alerts(section: dict[str, Any], *codes: str) -> list[tuple[float, str]]:
     return [(t, a) for t, a in section["alerts"] if a.split()[1] in codes]
 
 
-@pytest.fixture(scope="module")
-def plane_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    out = tmp_path_factory.mktemp("sitl") / "flight.json"
+def _flight(tmp: Path, name: str, cruise_s: float, after_s: float, *extra: str) -> dict[str, Any]:
+    """One ``flight`` of the runner: a circuit, ``cruise_s`` of healthy GPS, the
+    ``OUTAGE_S`` outage and ``after_s`` after it (``extra``: more runner options)."""
     args = [
         "flight",
         "--speedup",
         f"{SPEEDUP:g}",
         "--cruise-s",
-        f"{CRUISE_S:g}",
+        f"{cruise_s:g}",
         "--outage-s",
         f"{OUTAGE_S:g}",
         "--after-s",
-        "30",
+        f"{after_s:g}",
         "--params",
         PARAMS,
+        *extra,
     ]
-    return run_scenario(RUNNER, args, out, timeout_s=600.0)
+    return run_scenario(RUNNER, args, tmp / f"{name}.json", timeout_s=600.0)
+
+
+def _assert_outage_announced(outage: dict[str, Any], *, back: bool = True) -> None:
+    """GNSS_LOST within 1.5 s of the cut (and GNSS_BACK within 1.5 s of the return when
+    ``back``), and nothing in between: no GNSS_BACK before GPS returns, no FAULT."""
+    lost_s = outage["gnss_lost_latency_s"]
+    assert lost_s is not None
+    assert 0.0 <= lost_s <= 1.5
+    if back:
+        assert outage["gnss_back_latency_s"] is not None
+        assert 0.0 <= outage["gnss_back_latency_s"] <= 1.5
+    between = [
+        (t, a) for t, a in outage["alerts"] if outage["t_off_s"] + lost_s < t < outage["t_on_s"]
+    ]
+    assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
+
+
+@pytest.fixture(scope="module")
+def plane_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    return _flight(tmp_path_factory.mktemp("sitl"), "flight", CRUISE_S, 30.0)
 
 
 def test_plane_healthy_cruise(plane_flight: dict[str, Any]) -> None:
@@ -98,17 +119,7 @@ def test_plane_gps_outage(plane_flight: dict[str, Any]) -> None:
     svc, ap = outage["service"], outage["autopilot"]
     assert svc["mean_m"] <= ap["mean_m"], (svc, ap)
     assert svc["max_m"] <= ap["max_m"], (svc, ap)
-    assert outage["gnss_lost_latency_s"] is not None
-    assert 0.0 <= outage["gnss_lost_latency_s"] <= 1.5
-    assert outage["gnss_back_latency_s"] is not None
-    assert 0.0 <= outage["gnss_back_latency_s"] <= 1.5
-    # nothing in between: one GNSS_LOST, no GNSS_BACK before GPS returns, no FAULT
-    between = [
-        (t, a)
-        for t, a in outage["alerts"]
-        if outage["t_off_s"] + outage["gnss_lost_latency_s"] < t < outage["t_on_s"]
-    ]
-    assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
+    _assert_outage_announced(outage)
 
 
 FEED_CRUISE_S = 60.0
@@ -116,35 +127,17 @@ FEED_CRUISE_S = 60.0
 tests' (the outage falls in the same place of the circuit in both)."""
 
 
-def _short_flight(tmp: Path, name: str, *extra: str) -> dict[str, Any]:
-    args = [
-        "flight",
-        "--speedup",
-        f"{SPEEDUP:g}",
-        "--cruise-s",
-        f"{FEED_CRUISE_S:g}",
-        "--outage-s",
-        f"{OUTAGE_S:g}",
-        "--after-s",
-        "20",
-        "--params",
-        PARAMS,
-        *extra,
-    ]
-    return run_scenario(RUNNER, args, tmp / f"{name}.json", timeout_s=600.0)
-
-
 @pytest.fixture(scope="module")
 def plane_alone(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A 60 s cruise and the 30 s outage, the autopilot on its own GPS alone."""
-    return _short_flight(tmp_path_factory.mktemp("sitl"), "alone")
+    return _flight(tmp_path_factory.mktemp("sitl"), "alone", FEED_CRUISE_S, 20.0)
 
 
 @pytest.fixture(scope="module")
 def plane_fed(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """The same flight, the autopilot taking the service's GPS_INPUT as its GPS 2 while
     GPS 1 is lost (``--feed``: ``GPS_AUTO_SWITCH = 4``)."""
-    return _short_flight(tmp_path_factory.mktemp("sitl"), "fed", "--feed")
+    return _flight(tmp_path_factory.mktemp("sitl"), "fed", FEED_CRUISE_S, 20.0, "--feed")
 
 
 def test_plane_gps_outage_autopilot_better_fed(
@@ -166,36 +159,13 @@ def test_plane_gps_outage_autopilot_better_fed(
     # by a receiver's)
     assert plane_fed["feed_lag_s"] is not None
     assert 0.0 <= plane_fed["feed_lag_s"] <= 0.1
-    assert fed["gnss_lost_latency_s"] is not None
-    between = [
-        (t, a)
-        for t, a in fed["alerts"]
-        if fed["t_off_s"] + fed["gnss_lost_latency_s"] < t < fed["t_on_s"]
-    ]
-    assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
+    _assert_outage_announced(fed, back=False)
 
 
 @pytest.fixture(scope="module")
 def copter_flight(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    out = tmp_path_factory.mktemp("sitl") / "copter.json"
-    args = [
-        "flight",
-        "--vehicle",
-        "copter",
-        "--speedup",
-        f"{SPEEDUP:g}",
-        "--settle-s",
-        "15",
-        "--cruise-s",
-        "60",
-        "--outage-s",
-        f"{OUTAGE_S:g}",
-        "--after-s",
-        "20",
-        "--params",
-        PARAMS,
-    ]
-    return run_scenario(RUNNER, args, out, timeout_s=600.0)
+    tmp = tmp_path_factory.mktemp("sitl")
+    return _flight(tmp, "copter", 60.0, 20.0, "--vehicle", "copter", "--settle-s", "15")
 
 
 def test_copter_mission_healthy(copter_flight: dict[str, Any]) -> None:
@@ -214,16 +184,7 @@ def test_copter_gps_outage(copter_flight: dict[str, Any]) -> None:
     in ``python bench/sitl.py``'s figures, not compared: EKF3 has no position to compare.)"""
     outage = copter_flight["outage"]
     assert outage["service"]["n"] >= 0.9 * 10 * OUTAGE_S
-    assert outage["gnss_lost_latency_s"] is not None
-    assert 0.0 <= outage["gnss_lost_latency_s"] <= 1.5
-    assert outage["gnss_back_latency_s"] is not None
-    assert 0.0 <= outage["gnss_back_latency_s"] <= 1.5
-    between = [
-        (t, a)
-        for t, a in outage["alerts"]
-        if outage["t_off_s"] + outage["gnss_lost_latency_s"] < t < outage["t_on_s"]
-    ]
-    assert _alerts({"alerts": between}, "GNSS_BACK", "GNSS_LOST", "FAULT") == []
+    _assert_outage_announced(outage)
 
 
 def test_plane_reboot_and_restart(tmp_path: Path) -> None:
