@@ -155,6 +155,14 @@ def _start(
     return tap, GroundStation()
 
 
+def _stop(procs: Processes, tap: ServiceTap, gcs: GroundStation) -> None:
+    """Close the ground station, stop the service and the autopilot, close the tap."""
+    gcs.close()
+    procs.stop("companion")
+    procs.stop("sitl")
+    tap.close()
+
+
 def _stats(errors: list[float]) -> dict[str, float | int | None]:
     if not errors:
         return {"n": 0, "mean_m": None, "p95_m": None, "max_m": None}
@@ -284,10 +292,7 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         if not procs.alive("companion"):
             raise RuntimeError("companion died:\n" + procs.tail("companion"))
     finally:
-        gcs.close()
-        procs.stop("companion")
-        procs.stop("sitl")
-        tap.close()
+        _stop(procs, tap, gcs)
     log_path = newest_log(procs.workdir)
     log = read_log(log_path)
     result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0)
@@ -354,10 +359,7 @@ def taxi(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         if not procs.alive("companion"):
             raise RuntimeError("companion died:\n" + procs.tail("companion"))
     finally:
-        gcs.close()
-        procs.stop("companion")
-        procs.stop("sitl")
-        tap.close()
+        _stop(procs, tap, gcs)
     return {
         "t0_s": t0,
         "t1_s": t_end,
@@ -430,10 +432,7 @@ def reboot(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
             gcs.sleep(5.0)
         out["companion_alive"] = procs.alive("companion")
     finally:
-        gcs.close()
-        procs.stop("companion")
-        procs.stop("sitl")
-        tap.close()
+        _stop(procs, tap, gcs)
     out["companion_log_tail"] = procs.tail("companion", 4000)
     return out
 
