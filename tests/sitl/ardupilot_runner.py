@@ -94,23 +94,24 @@ MissionItem = tuple[int, int, tuple[float, ...], float, float, float]
 
 
 def _circuit(
-    takeoff: MissionItem, corners_ne_m: list[tuple[float, float]], alt_m: float
+    takeoff_ne_m: tuple[float, float],
+    takeoff_pitch_deg: float,
+    takeoff_alt_m: float,
+    corners_ne_m: list[tuple[float, float]],
+    alt_m: float,
 ) -> list[MissionItem]:
-    """Home, ``takeoff``, the corners (north, east of home, m; ``alt_m`` above it) and a
-    DO_JUMP back to the first corner: the rectangle flown in a loop."""
+    """Home, a take-off towards ``takeoff_ne_m`` (north, east of home, m) to
+    ``takeoff_alt_m``, the corners (``alt_m`` above home) and a DO_JUMP back to the first
+    corner: the rectangle flown in a loop."""
     rel = MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
-    home = (
-        MAV.MAV_FRAME_GLOBAL,
-        MAV.MAV_CMD_NAV_WAYPOINT,
-        (0, 0, 0, 0),
-        HOME_LAT,
-        HOME_LON,
-        HOME_ALT,
-    )
-    items: list[MissionItem] = [home, takeoff]
+    wp, pad = MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0)
+    items: list[MissionItem] = [(MAV.MAV_FRAME_GLOBAL, wp, pad, HOME_LAT, HOME_LON, HOME_ALT)]
+    tk_lat, tk_lon = harness.offset_deg(HOME_LAT, HOME_LON, *takeoff_ne_m)
+    takeoff_params = (takeoff_pitch_deg, 0, 0, 0)
+    items.append((rel, MAV.MAV_CMD_NAV_TAKEOFF, takeoff_params, tk_lat, tk_lon, takeoff_alt_m))
     for n, e in corners_ne_m:
         lat, lon = harness.offset_deg(HOME_LAT, HOME_LON, n, e)
-        items.append((rel, MAV.MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), lat, lon, alt_m))
+        items.append((rel, wp, pad, lat, lon, alt_m))
     items.append((rel, MAV.MAV_CMD_DO_JUMP, (2, 100, 0, 0), 0.0, 0.0, 0.0))
     return items
 
@@ -118,29 +119,14 @@ def _circuit(
 def plane_circuit() -> list[MissionItem]:
     """Home, a take-off along the runway (353 deg) and a 900 x 600 m rectangle flown in a
     loop (DO_JUMP back to its first corner)."""
-    tk_lat, tk_lon = harness.offset_deg(HOME_LAT, HOME_LON, 300, -40)
-    takeoff = (
-        MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-        MAV.MAV_CMD_NAV_TAKEOFF,
-        (15, 0, 0, 0),
-        tk_lat,
-        tk_lon,
-        40.0,
-    )
-    return _circuit(takeoff, [(700, -80), (700, 520), (-200, 520), (-200, -80)], CRUISE_ALT_M)
+    corners = [(700.0, -80.0), (700.0, 520.0), (-200.0, 520.0), (-200.0, -80.0)]
+    return _circuit((300.0, -40.0), 15.0, 40.0, corners, CRUISE_ALT_M)
 
 
 def copter_circuit() -> list[MissionItem]:
     """Home, a take-off to 25 m and a 200 x 120 m rectangle flown in a loop."""
-    takeoff = (
-        MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-        MAV.MAV_CMD_NAV_TAKEOFF,
-        (0, 0, 0, 0),
-        HOME_LAT,
-        HOME_LON,
-        COPTER_ALT_M,
-    )
-    return _circuit(takeoff, [(100, 0), (100, 120), (-100, 120), (-100, 0)], COPTER_ALT_M)
+    corners = [(100.0, 0.0), (100.0, 120.0), (-100.0, 120.0), (-100.0, 0.0)]
+    return _circuit((0.0, 0.0), 0.0, COPTER_ALT_M, corners, COPTER_ALT_M)
 
 
 def _start(
