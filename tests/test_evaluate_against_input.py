@@ -218,6 +218,27 @@ def test_gap_closure_worse_than_holding_fails(tmp_path: Path) -> None:
     assert (s.passed_alert, s.passed_ratio, s.passed_inside99) == (False, False, False)
 
 
+@pytest.mark.parametrize(("east_m", "passed"), [(0.005, True), (0.03, False)])
+def test_gap_closure_tied_with_holding_within_the_rounding(
+    tmp_path: Path, east_m: float, passed: bool
+) -> None:
+    """Parked: holding closes at 0 m. A service 5 mm off (under the published position's
+    rounding) ties with it; 3 cm off is worse than holding."""
+    logs = Logs()
+    base(logs, 40.0)
+    for t in ticks(10.0, 40.0, 5.0):
+        if not 20.0 < t < 26.0:
+            logs.fix(t, 50.0, 100.0, 0.0, 0.0)
+    for t in ticks(10.0, 40.0, 10.0):
+        logs.publish(t, 50.0, 100.0 + (east_m if 20.0 < t < 26.0 else 0.0), 0.0, 0.0, sigma_m=2.0)
+    logs.alert(21.0, AlertCode.GNSS_LOST, "no usable fix 1.0 s")
+    res = evaluate_against_input(*reversed(logs.write(tmp_path)))
+    (gap,) = res.gaps
+    assert gap.closure_h_m is not None and gap.hold_h_m is not None
+    assert gap.closure_h_m - gap.hold_h_m == pytest.approx(east_m, abs=0.006)
+    assert res.gaps_summary.passed_ratio is passed
+
+
 # --------------------------------------------------------------------------- confidently wrong
 
 

@@ -71,7 +71,9 @@ Concurrent fix
       best stream; :data:`IMU_MIN_HZ` or more is "IMU running".
     * Required, over the gaps with the IMU running: median ratio <= :data:`RATIO_MEDIAN_MAX`,
       every ratio <= :data:`RATIO_ANY_MAX`, every closure inside its 99 % bound. A gap with
-      no solution to close is a failure.
+      no solution to close is a failure. A closure within :data:`CLOSURE_TIE_M` (the
+      published position's rounding) of the better of hold and constant velocity is judged
+      a tie (ratio 1).
 4. Whole-stream dropouts
     No decoded navigation sample (IMU, attitude, GNSS, the autopilot's own position,
     VFR_HUD, landed state: everything but HEARTBEAT and SYSTEM_TIME) for
@@ -160,6 +162,10 @@ GAP_ALERT_MAX_S = 1.5
 IMU_MIN_HZ = 20.0
 RATIO_MEDIAN_MAX = 1.0
 RATIO_ANY_MAX = 1.5
+CLOSURE_TIE_M = 0.008
+"""A closure this close to the better of hold and constant velocity is judged equal to it
+(ratio 1): half the diagonal of the published position's step (1e-7 deg of latitude and
+longitude, 1.1 cm north), the rounding any published closure carries."""
 CLOSURE_MAX_AGE_S = 1.0
 DROPOUT_MIN_S = 3.0
 NO_GNSS_ALERT_MAX_S = 5.0
@@ -759,6 +765,16 @@ def _closure(g: GapResult, f: _Fixes, i: int, k: int, out: _Output) -> GapResult
     )
 
 
+def _judged_ratio(g: GapResult) -> float | None:
+    """The gap's ratio as judged: 1 where the closure is within :data:`CLOSURE_TIE_M` of
+    the better of hold and constant velocity."""
+    if g.ratio is None or g.closure_h_m is None or g.hold_h_m is None or g.cv_h_m is None:
+        return g.ratio
+    if g.closure_h_m - min(g.hold_h_m, g.cv_h_m) <= CLOSURE_TIE_M:
+        return min(g.ratio, 1.0)
+    return g.ratio
+
+
 def _gap_summary(gaps: Sequence[GapResult]) -> GapsSummary:
     if not gaps:
         return GapsSummary(
@@ -778,7 +794,7 @@ def _gap_summary(gaps: Sequence[GapResult]) -> GapsSummary:
     lat_ok = [x for x in lat if x is not None]
     passed_alert = missed == 0 and all(x <= GAP_ALERT_MAX_S for x in lat_ok)
     running = [g for g in gaps if g.imu_running and g.t_first_fix_s is not None]
-    ratios = [g.ratio for g in running]
+    ratios = [_judged_ratio(g) for g in running]
     if running:
         finite = [r for r in ratios if r is not None]
         med = float(np.median(finite)) if finite else None
