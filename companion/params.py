@@ -380,6 +380,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
     ("ENG_GAP_ATT", "engine.gap_attitude"),
     ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
+    ("DEC_LAG_MEASURE", "decoder.gnss_delay_measure"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -41,6 +41,7 @@ from typing import Any
 
 from companion.config import Config
 from companion.engine import Engine
+from companion.engine.gnss_lag import LagTracker, MeasuredLag
 from companion.mavlink.autopilot_params import AutopilotParams
 from companion.mavlink.commands import DecodedCommand, Retransmissions
 from companion.mavlink.decode import Decoder
@@ -199,6 +200,10 @@ class Pipeline:
         rate): read over the parameter protocol when it appears and after a reboot."""
         self._loop_rate_hz: float | None = None
         self._warned_no_mav_gps = False
+        self.lag = LagTracker() if self.config.decoder.gnss_delay_measure else None
+        """Receiver 0's lag measured in flight (:mod:`companion.engine.gnss_lag`)."""
+        self._measured_lag_s: float | None = None
+        """The measured lag the fixes are placed with (None: not taken)."""
         self.raw: RawLink | None = RawLink(self.config.raw) if self.config.raw.enabled else None
         """The raw receiver's carrier-phase link (``[raw]``; :mod:`companion.raw.link`)."""
 
@@ -249,8 +254,19 @@ class Pipeline:
             return early if command is None else early + self._answer(command, None, t_rx_s)
         frames: list[bytes] = []
         handle = self.engine.handle
+        lag = self.lag
         for sample in samples:
             kind = type(sample)
+            if lag is not None:
+                if kind is ImuSample:
+                    lag.on_imu(sample)  # type: ignore[arg-type]
+                elif kind is AttitudeSample:
+                    lag.on_attitude(sample)  # type: ignore[arg-type]
+                elif kind is GnssFix:
+                    lag.on_fix(sample)  # type: ignore[arg-type]
+                    measured = lag.take()
+                    if measured is not None:
+                        frames += self._on_measured_lag(measured, sample.t_s)
             if kind is HeadingCommand:
                 command = self.decoder.take_command()  # left with every HeadingCommand
                 if command is not None:
@@ -263,6 +279,8 @@ class Pipeline:
                 self._data_clock = None
                 self._inertial_clock = False
                 self.autopilot_params.reset()  # what was derived stands until read again
+                if lag is not None:
+                    lag.restart(self.decoder.gnss.delay_s[0])
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
@@ -354,9 +372,12 @@ class Pipeline:
                 )
         for receiver in (0, 1):
             delay_s = ap.gps_delay_s(receiver)
-            delay_s = self.config.decoder.gnss_delay_s if delay_s is None else delay_s
+            if delay_s is None:
+                delay_s = self._default_delay_s(receiver)
             if delay_s != gnss.delay_s[receiver]:
                 gnss.delay_s[receiver] = delay_s
+                if receiver == 0 and self.lag is not None:
+                    self.lag.restart(delay_s)
                 log.info(
                     "GNSS receiver %d: fixes taken %.3f s before their arrival", receiver, delay_s
                 )
@@ -376,6 +397,44 @@ class Pipeline:
                 for r in self.config.streams.rates_hz().values()
             ):
                 return self._request_streams()
+        return []
+
+    def _default_delay_s(self, receiver: int) -> float:
+        """A receiver's lag where the autopilot's parameter gives none: the configured one,
+        else (receiver 0) the one measured in flight, else 0."""
+        configured = self.config.decoder.gnss_delay_s
+        if configured > 0.0 or receiver != 0 or self._measured_lag_s is None:
+            return configured
+        return self._measured_lag_s
+
+    def _on_measured_lag(self, m: MeasuredLag, t_s: float) -> list[bytes]:
+        """Receiver 0's lag measured: taken where nothing else gives it; a disagreeing
+        autopilot parameter is announced, a configured lag only logged."""
+        gnss = self.decoder.gnss
+        ap_s = self.autopilot_params.gps_delay_s(0)
+        said = f"{m.lag_s * 1000.0:.0f}+/-{m.sigma_s * 1000.0:.0f} ms"
+        if ap_s is not None:
+            alert = Alert(
+                t_s,
+                AlertCode.AP_CONFIG,
+                Severity.WARNING,
+                f"GPS1_DELAY_MS {ap_s * 1000.0:.0f}, lag {said}",  # one STATUSTEXT
+            )
+            log.warning("CMP %s %s", alert.code.value, alert.text)
+            self.encoder.allow_next(alert.code)
+            return self._encode(alert)
+        if self.config.decoder.gnss_delay_s > 0.0:
+            log.warning(
+                "GNSS receiver 0: configured lag %.3f s, measured %s: the configured one kept",
+                self.config.decoder.gnss_delay_s,
+                said,
+            )
+            return []
+        self._measured_lag_s = m.lag_s
+        gnss.delay_s[0] = m.lag_s
+        assert self.lag is not None
+        self.lag.restart(m.lag_s)
+        log.warning("GNSS receiver 0: lag measured %s: fixes placed with it", said)
         return []
 
     def bad_frames(self, count: int) -> None:

@@ -115,6 +115,31 @@ def test_gps_lag_from_the_autopilot() -> None:
     assert [round(f.t_s, 6) for f in fixes] == [9.98]
 
 
+def test_measured_gps_lag_taken_where_the_autopilot_gives_none() -> None:
+    """GPS1_DELAY_MS 0 (the driver's default, unknown here): the lag measured in flight
+    places the fixes, and stays through a new reading of the parameters."""
+    from companion.engine.gnss_lag import MeasuredLag
+
+    p, _ = _started()
+    p.on_message(_param("GPS1_DELAY_MS", 0.0), 0.1)
+    assert p._on_measured_lag(MeasuredLag(0.22, 0.015, 3), 10.0) == []  # noqa: SLF001
+    assert p.decoder.gnss.delay_s[0] == pytest.approx(0.22)
+    p.on_message(_param("GPS1_DELAY_MS", 0.0), 0.3)
+    fixes = p.decoder.decode(AP.parsed(gps_raw(10_100_000)), 0.4)
+    assert [round(f.t_s, 6) for f in fixes] == [9.88]
+
+
+def test_measured_gps_lag_against_the_autopilot_parameter_is_announced() -> None:
+    from companion.engine.gnss_lag import MeasuredLag
+
+    p, _ = _started()
+    p.on_message(_param("GPS1_DELAY_MS", 100.0), 0.1)
+    out = _msgs(p._on_measured_lag(MeasuredLag(0.083, 0.006, 4), 10.0))  # noqa: SLF001
+    texts = [m.text for m in out if m.get_type() == "STATUSTEXT"]
+    assert texts == ["CMP AP_CONFIG GPS1_DELAY_MS 100, lag 83+/-6 ms"]
+    assert p.decoder.gnss.delay_s[0] == pytest.approx(0.1)  # the autopilot's kept
+
+
 def test_gps_id_from_autopilot_turned_off_live() -> None:
     import dataclasses
 

@@ -34,6 +34,10 @@ class DecoderConfig:
     """A boot-clock step backwards larger than this is a reboot, s."""
     gnss_delay_s: float = ranged(0.0, ge=0.0, le=1.0)
     """Subtracted from GNSS fix times (receiver lag not in the stamp), s."""
+    gnss_delay_measure: bool = True
+    """Measure the first receiver's lag in flight (its velocity against the IMU): used
+    where neither the autopilot's lag parameter nor ``gnss_delay_s`` gives one, announced
+    (``AP_CONFIG``) where the autopilot's parameter disagrees with it."""
     system_time_wait_s: float = ranged(3.0, ge=0.0, le=60.0)
     """How long epoch-stamped messages wait for SYSTEM_TIME's exact offset, s."""
 

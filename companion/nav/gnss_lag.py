@@ -1,0 +1,194 @@
+"""How late a receiver's fixes are stamped: the GNSS lag, estimated from the IMU.
+
+A fix's velocity ``v_k`` is valid at ``t_k - lag`` (``t_k``: its stamp, with the lag the
+service already subtracts). Between two fixes the velocity changes by the integral of
+the horizontal acceleration ``a_ne = (C_nb f_b)_ne`` (gravity has no horizontal part)::
+
+    v_k - v_{k-1} = int_{t_{k-1} - lag}^{t_k - lag} a_ne dt + b_ne (t_k - t_{k-1}) + noise
+
+with ``b_ne`` a constant over the window (accelerometer bias and tilt error times g). For
+each lag of a grid the bias is solved by least squares and the residual sum of squares
+``J(lag)`` kept; the minimum, refined by a parabola, is the estimate. Its standard
+deviation is Fisher's: ``d r_k / d lag = a(t_k - lag) - a(t_{k-1} - lag)`` (taken as a
+difference over +-50 ms of lag: accelerations averaged over 0.1 s), so
+``sigma^-2 = sum |d r_k / d lag|^2 / (2 sigma_r^2)``, the factor 2 for the differenced
+fixes' correlated noise, and never below the scatter of the window's blocks. The lag is
+observable only while the acceleration changes: a straight, steady flight gives a large
+sigma and no estimate. Fixes are differenced about a second apart (``baseline_s``): the
+velocity change grows with the interval, a fix's noise does not.
+
+Pure: samples in, an estimate out; no clock.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.types import FloatArray
+
+
+@dataclass(frozen=True, slots=True)
+class LagEstimate:
+    """The lag to add to the one already subtracted from the fixes' stamps."""
+
+    lag_s: float
+    sigma_s: float
+    n_fixes: int
+    residual_mps: float
+    """RMS of the velocity-change residual at the estimate."""
+    excitation_mps2: float
+    """RMS change of the horizontal acceleration between fixes (what makes it observable)."""
+
+
+@dataclass(frozen=True, slots=True)
+class LagConfig:
+    window_s: float = 60.0
+    """Fixes and IMU samples kept."""
+    min_lag_s: float = -0.15
+    """The grid's ends, relative to the lag already subtracted (negative: it overstates)."""
+    max_lag_s: float = 0.35
+    step_s: float = 0.005
+    min_fixes: int = 30
+    baseline_s: float = 1.0
+    """Fixes are differenced this far apart at least (the velocity change grows with it,
+    a fix's noise does not)."""
+    max_fix_interval_s: float = 1.6
+    """Longer intervals between the fixes differenced are not used."""
+    min_excitation_mps2: float = 0.05
+    """Below this RMS acceleration change the lag is not observable enough to try."""
+    smooth_s: float = 0.05
+    """Half-width of the lag difference the model's slope is taken over, s."""
+    blocks: int = 4
+    """The window is cut into this many blocks, each with its own bias; the scatter of
+    their lags bounds the estimate's sigma from below."""
+
+
+class GnssLagEstimator:
+    """Keeps the window's horizontal accelerations and fix velocities; :meth:`estimate`."""
+
+    def __init__(self, config: LagConfig | None = None) -> None:
+        self.config = config or LagConfig()
+        self._acc: deque[tuple[float, float, float]] = deque()
+        self._fix: deque[tuple[float, float, float]] = deque()
+
+    def reset(self) -> None:
+        """Forget everything (the stamps' lag changed, or the stream restarted)."""
+        self._acc.clear()
+        self._fix.clear()
+
+    def add_acceleration(self, t_s: float, acc_ne_mps2: FloatArray) -> None:
+        """The horizontal acceleration (NED north, east) at ``t_s``; out-of-order dropped."""
+        if self._acc and t_s <= self._acc[-1][0]:
+            return
+        if not (math.isfinite(acc_ne_mps2[0]) and math.isfinite(acc_ne_mps2[1])):
+            return
+        self._acc.append((t_s, float(acc_ne_mps2[0]), float(acc_ne_mps2[1])))
+        self._trim(self._acc, t_s)
+
+    def add_fix(self, t_s: float, vel_ne_mps: FloatArray) -> None:
+        """A fix's horizontal velocity at its (lag-corrected) stamp."""
+        if self._fix and t_s <= self._fix[-1][0]:
+            return
+        if not (math.isfinite(vel_ne_mps[0]) and math.isfinite(vel_ne_mps[1])):
+            return
+        self._fix.append((t_s, float(vel_ne_mps[0]), float(vel_ne_mps[1])))
+        self._trim(self._fix, t_s)
+
+    def _trim(self, buf: deque[tuple[float, float, float]], t_s: float) -> None:
+        while buf and buf[0][0] < t_s - self.config.window_s:
+            buf.popleft()
+
+    def estimate(self) -> LagEstimate | None:
+        """The window's estimate, or None when too few fixes or too little excitation."""
+        cfg = self.config
+        if len(self._fix) < cfg.min_fixes + 1 or len(self._acc) < 4:
+            return None
+        acc = np.array(self._acc)
+        fix = np.array(self._fix)
+        t_a = acc[:, 0]
+        # cumulative integral of the acceleration (trapezoid), interpolated at any time
+        seg = 0.5 * (acc[1:, 1:] + acc[:-1, 1:]) * np.diff(t_a)[:, None]
+        cum = np.vstack([np.zeros((1, 2)), np.cumsum(seg, axis=0)])
+        fix = fix[_spaced(fix[:, 0], cfg.baseline_s)]
+        t_f = fix[:, 0]
+        dt_f = np.diff(t_f)
+        keep = dt_f <= cfg.max_fix_interval_s
+        t0, t1, dt = t_f[:-1][keep], t_f[1:][keep], dt_f[keep]
+        dv = np.diff(fix[:, 1:], axis=0)[keep]
+        lags = np.arange(cfg.min_lag_s, cfg.max_lag_s + 0.5 * cfg.step_s, cfg.step_s)
+        # every interval must lie inside the IMU's span at every lag tried
+        inside = (t0 - lags[-1] >= t_a[0]) & (t1 - lags[0] <= t_a[-1])
+        t0, t1, dt, dv = t0[inside], t1[inside], dt[inside], dv[inside]
+        n = t0.size
+        if n < cfg.min_fixes:
+            return None
+        # dI[l, k, axis]: the integral over fix interval k at lag l
+        d_int = np.stack(
+            [
+                np.interp(t1[None, :] - lags[:, None], t_a, cum[:, ax])
+                - np.interp(t0[None, :] - lags[:, None], t_a, cum[:, ax])
+                for ax in (0, 1)
+            ],
+            axis=-1,
+        )
+        resid = dv[None, :, :] - d_int
+        # each block of the window has its own constant bias b_ne (least squares, regressor
+        # dt); the blocks' own minima measure how much the lag moves with what the model
+        # leaves out (attitude error, vibration), which Fisher's sigma cannot see
+        blocks = np.array_split(np.arange(n), cfg.blocks)
+        costs = np.empty((len(blocks), lags.size))
+        for j, idx in enumerate(blocks):
+            r, w = resid[:, idx, :], dt[idx]
+            b = np.einsum("lka,k->la", r, w) / float(w @ w)
+            r = r - b[:, None, :] * w[None, :, None]
+            costs[j] = np.einsum("lka,lka->l", r, r)
+        cost = costs.sum(axis=0)
+        lag, on_edge = _minimum(lags, cost)
+        block_lags = [_minimum(lags, c)[0] for c in costs]
+        # the model's slope in the lag, over +-smooth_s (the acceleration averaged over
+        # 2 smooth_s: a single vibrating sample says nothing about the motion)
+        k = int(np.argmin(np.abs(lags - lag)))
+        h = max(1, round(cfg.smooth_s / cfg.step_s))
+        lo, hi = max(k - h, 0), min(k + h, lags.size - 1)
+        jerk = (d_int[lo] - d_int[hi]) / float(lags[hi] - lags[lo])
+        excitation = float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1))))
+        i = int(np.argmin(cost))
+        var_r = float(cost[i]) / max(2 * (n - len(blocks)), 1)
+        info = float(np.sum(jerk * jerk)) / (2.0 * var_r) if var_r > 0.0 else math.inf
+        if on_edge or excitation < cfg.min_excitation_mps2 or not info > 0.0:
+            return None
+        sigma = max(
+            1.0 / math.sqrt(info), float(np.std(block_lags, ddof=1)) / math.sqrt(len(blocks))
+        )
+        return LagEstimate(
+            lag_s=lag,
+            sigma_s=sigma,
+            n_fixes=n,
+            residual_mps=math.sqrt(var_r),
+            excitation_mps2=excitation,
+        )
+
+
+def _minimum(lags: FloatArray, cost: FloatArray) -> tuple[float, bool]:
+    """The grid's minimum of ``cost``, refined by a parabola; and whether it is at an end."""
+    i = int(np.argmin(cost))
+    lag = float(lags[i])
+    if 0 < i < lags.size - 1:
+        c_m, c_0, c_p = cost[i - 1], cost[i], cost[i + 1]
+        curv = c_m - 2.0 * c_0 + c_p
+        if curv > 0.0:
+            lag += 0.5 * float(lags[1] - lags[0]) * float(c_m - c_p) / float(curv)
+    return lag, i in (0, lags.size - 1)
+
+
+def _spaced(t_s: FloatArray, baseline_s: float) -> FloatArray:
+    """Indices of a chain of times at least ``baseline_s`` apart, from the first."""
+    keep = [0]
+    for i in range(1, t_s.size):
+        if t_s[i] - t_s[keep[-1]] >= baseline_s - 1e-6:
+            keep.append(i)
+    return np.array(keep, dtype=int)
