@@ -28,7 +28,13 @@ coverage. ``walk_row()`` returns the figures as a dict (one row of a larger tabl
 the measurement floors a hand-carried consumer IMU can honour (:data:`HANDHELD_FLOORS`);
 the table also shows the service defaults.
 
-Run: ``python bench/walk_0827.py`` (skips with a stated reason without the data).
+Two outages are a small sample: ``--sliding`` replays the schedule shifted in 5 s steps
+over its period (14 outages over the whole walk) and prints every closure, the means,
+and how each outage's vertical error grew (:func:`vertical_growth`: the part from the
+vertical velocity at the outage's start and the part from an acceleration error).
+
+Run: ``python bench/walk_0827.py [--sliding]`` (skips with a stated reason without the
+data).
 """
 
 from __future__ import annotations
@@ -155,11 +161,13 @@ def load_walk(data_dir: Path = DATA_DIR) -> Walk:
     )
 
 
-def outages(walk: Walk) -> list[tuple[float, float]]:
-    """The outage windows [start, end) in GPST s (the source repository's schedule)."""
+def outages(walk: Walk, start_s: float = OUTAGE_START_S) -> list[tuple[float, float]]:
+    """The outage windows [start, end) in GPST s: the source repository's schedule, the
+    first ``start_s`` after the first fix (:data:`OUTAGE_START_S`; other values shift the
+    schedule, see :func:`sliding_rows`)."""
     t0, t1 = float(walk.pos_t[0]), float(walk.pos_t[-1])
     out = []
-    s = t0 + OUTAGE_START_S
+    s = t0 + start_s
     while s < t1 - OUTAGE_END_MARGIN_S:
         out.append((s, s + OUTAGE_LEN_S))
         s += OUTAGE_PERIOD_S
@@ -170,9 +178,12 @@ def in_outage(t: float, windows: list[tuple[float, float]]) -> bool:
     return any(a <= t < b for a, b in windows)
 
 
-def write_walk_tlog(walk: Walk, path: Path) -> dict[str, Any]:
-    """Write the walk as a MAVLink 2 tlog (system 1, component 1); returns what was written."""
-    windows = outages(walk)
+def write_walk_tlog(
+    walk: Walk, path: Path, outage_start_s: float = OUTAGE_START_S
+) -> dict[str, Any]:
+    """Write the walk as a MAVLink 2 tlog (system 1, component 1), GNSS withheld in the
+    outages of :func:`outages` (first at ``outage_start_s``); returns what was written."""
+    windows = outages(walk, outage_start_s)
     boot0 = float(walk.pos_t[0]) - BOOT_BEFORE_FIRST_FIX_S  # GPST at boot
 
     def rec_t(gpst: float) -> float:  # UNIX-epoch record time
@@ -282,6 +293,20 @@ def replay_walk(tlog: Path, out: Path, config: Config | None = None) -> tuple[Pi
     return pipeline, published
 
 
+def vertical_growth(t_s: np.ndarray, err_up_m: np.ndarray) -> tuple[float, float, float]:
+    """Least-squares ``err = e0 + v t + a t^2 / 2`` of a vertical error (m, published minus
+    reference, up) at times ``t_s`` from an outage's start: ``(e0 m, v m/s, a m/s^2)``. A
+    quadratic growth is an acceleration error (accelerometer bias, gravity), a linear one
+    the vertical velocity's error at the outage's start; NaNs with fewer than 3 points."""
+    t = np.asarray(t_s, dtype=float)
+    e = np.asarray(err_up_m, dtype=float)
+    if len(t) < 3:
+        return (math.nan, math.nan, math.nan)
+    design = np.column_stack([np.ones_like(t), t, 0.5 * t * t])
+    coef, *_ = np.linalg.lstsq(design, e, rcond=None)
+    return (float(coef[0]), float(coef[1]), float(coef[2]))
+
+
 def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline) -> dict[str, Any]:
     """The figures of one replay (see the module docstring)."""
     boot0 = info["boot0_gpst"]
@@ -317,6 +342,7 @@ def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline)
     cov_v = float(np.mean(err_v[inside] <= K95_V * v_acc[inside])) if inside.any() else math.nan
 
     closures = []
+    growth: list[tuple[float, float, float]] = []
     for a, b in info["windows"]:
         before = np.nonzero(ref_t < a)[0]
         after = np.nonzero(ref_t >= b)[0]
@@ -341,6 +367,9 @@ def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline)
             abs(walk.h_m[kl] + vu * dt - h_c),
         )
         closures.append((pub_err, hold_err, cv_err, t_close - float(walk.pos_t[0])))
+        # how the vertical error grew over the outage (published minus reference, signed)
+        in_gap = (pub_t >= a) & (pub_t <= float(pub_t[j]))
+        growth.append(vertical_growth(pub_t[in_gap] - a, pub_h[in_gap] - rh[in_gap]))
     gnss = Counter(pipeline.engine.stats.gnss)
     used = gnss.get("fused", 0) + gnss.get("reinitialised", 0)
     unused = {k: v for k, v in gnss.items() if k not in ("fused", "reinitialised") and v}
@@ -358,6 +387,7 @@ def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline)
         "cv_h_m": mean(2, 0),
         "cv_v_m": mean(2, 1),
         "per_outage": [(c[3], c[0], c[1], c[2]) for c in closures],
+        "vertical_growth": growth,
         "fixes_sent": info["fixes"],
         "fixes_used": used,
         "fixes_unused": info["fixes"] - used,
@@ -370,17 +400,25 @@ def score(walk: Walk, info: dict[str, Any], published: list, pipeline: Pipeline)
     }
 
 
-def walk_row(config: Config | None = None, data_dir: Path = DATA_DIR) -> dict[str, Any] | None:
+def walk_row(
+    config: Config | None = None,
+    data_dir: Path = DATA_DIR,
+    outage_start_s: float = OUTAGE_START_S,
+    walk: Walk | None = None,
+) -> dict[str, Any] | None:
     """The walk's figures (a dict), or None without the data. ``config`` defaults to
-    :func:`handheld_config` (the device's floors); ``Config()`` gives the service defaults."""
-    if not (data_dir / "imu_1730.csv").exists():
-        return None
+    :func:`handheld_config` (the device's floors); ``Config()`` gives the service defaults.
+    ``outage_start_s`` shifts the outage schedule (:func:`outages`); ``walk`` is the
+    recording when already loaded."""
+    if walk is None:
+        if not (data_dir / "imu_1730.csv").exists():
+            return None
+        walk = load_walk(data_dir)
     if config is None:
         config = handheld_config()
-    walk = load_walk(data_dir)
     with tempfile.TemporaryDirectory() as tmp:
         tlog = Path(tmp) / "walk_0827.tlog"
-        info = write_walk_tlog(walk, tlog)
+        info = write_walk_tlog(walk, tlog, outage_start_s)
         pipeline, published = replay_walk(tlog, Path(tmp) / "walk_0827.out.tlog", config)
     return score(walk, info, published, pipeline)
 
@@ -392,10 +430,13 @@ def print_row(row: dict[str, Any], title: str) -> None:
     print(f"{'  target':24s}{TARGET_H_M:14.2f}{TARGET_V_M:12.2f}")
     print(f"{'hold last fix':24s}{row['hold_h_m']:14.2f}{row['hold_v_m']:12.2f}")
     print(f"{'constant velocity':24s}{row['cv_h_m']:14.2f}{row['cv_v_m']:12.2f}")
-    for t, pub, hold, cv in row["per_outage"]:
+    for (t, pub, hold, cv), (_, v0, acc) in zip(
+        row["per_outage"], row["vertical_growth"], strict=True
+    ):
         print(
             f"  closes at {t:6.1f} s: published {pub[0]:.2f} / {pub[1]:.2f}, "
-            f"hold {hold[0]:.2f} / {hold[1]:.2f}, cv {cv[0]:.2f} / {cv[1]:.2f}"
+            f"hold {hold[0]:.2f} / {hold[1]:.2f}, cv {cv[0]:.2f} / {cv[1]:.2f}; "
+            f"vertical error grew as {v0:+.3f} m/s t {acc:+.4f} m/s^2 t^2/2"
         )
     print(
         f"healthy fixes unused: {row['fixes_unused']} of {row['fixes_sent']} "
@@ -415,12 +456,79 @@ def print_row(row: dict[str, Any], title: str) -> None:
     print("targets met" if ok else "targets NOT met")
 
 
+SLIDING_STARTS_S = tuple(20.0 + 5.0 * k for k in range(9))
+"""First-outage starts of the shifted schedules: every 5 s over one 45 s period, so that
+the 15 s outages sample the whole walk, not two windows of it."""
+
+
+def sliding_rows(config: Config | None = None, data_dir: Path = DATA_DIR) -> list[dict[str, Any]]:
+    """:func:`walk_row` for each schedule of :data:`SLIDING_STARTS_S` (empty without the
+    data): two outages decide the source's figure; these fourteen say how the filter
+    bridges this walk in general."""
+    if not (data_dir / "imu_1730.csv").exists():
+        return []
+    walk = load_walk(data_dir)
+    rows = []
+    for start in SLIDING_STARTS_S:
+        row = walk_row(config, data_dir, start, walk)
+        if row is not None:
+            rows.append(row)
+    return rows
+
+
+def print_sliding(rows: list[dict[str, Any]]) -> None:
+    """Every outage of the shifted schedules, and the means over them."""
+    closes: list[tuple[float, float, float, float]] = []  # h, v, hold h, cv h
+    lin: list[float] = []
+    quad: list[float] = []
+    print(f"walk_0827, handheld floors, schedules shifted by 5 s: {OUTAGE_LEN_S:.0f} s outages")
+    print(f"{'closes at s':>12s}{'H m':>7s}{'V m':>7s}{'v0 err m/s':>12s}{'a err m/s2':>12s}")
+    for row in rows:
+        for (t, pub, hold, cv), (_, v0, acc) in zip(
+            row["per_outage"], row["vertical_growth"], strict=True
+        ):
+            closes.append((pub[0], pub[1], hold[0], cv[0]))
+            lin.append(v0 * OUTAGE_LEN_S)
+            quad.append(0.5 * acc * OUTAGE_LEN_S**2)
+            print(f"{t:12.1f}{pub[0]:7.2f}{pub[1]:7.2f}{v0:12.3f}{acc:12.4f}")
+    c = np.array(closes)
+    if not len(c):
+        print("no outage closed")
+        return
+    print(
+        f"{len(c)} outages: mean closure {c[:, 0].mean():.2f} m horizontal, "
+        f"{c[:, 1].mean():.2f} m vertical (targets {TARGET_H_M} / {TARGET_V_M}); "
+        f"hold last fix {c[:, 2].mean():.2f} m, constant velocity {c[:, 3].mean():.2f} m "
+        "horizontal"
+    )
+    print(
+        f"vertical growth over {OUTAGE_LEN_S:.0f} s, RMS: {math.sqrt(np.mean(np.square(lin))):.2f}"
+        f" m from the velocity at the start, {math.sqrt(np.mean(np.square(quad))):.2f} m from "
+        "the acceleration error"
+    )
+    cov = np.array([(r["cov95_h"], r["cov95_v"], r["fixes_unused"]) for r in rows])
+    print(
+        f"95 % bound coverage, worst schedule: {100 * cov[:, 0].min():.1f} % horizontal, "
+        f"{100 * cov[:, 1].min():.1f} % vertical; healthy fixes unused: {int(cov[:, 2].sum())}"
+    )
+
+
 def main() -> int:
-    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--sliding",
+        action="store_true",
+        help="also replay the schedule shifted by 5 s steps over its 45 s period "
+        "(14 outages) and print every closure and the means",
+    )
+    args = parser.parse_args()
     row = walk_row()
     if row is None:
         print(f"skipped: no recording at {DATA_DIR} (the real data is not in this checkout)")
         return 0
+    if args.sliding:
+        print_sliding(sliding_rows())
+        print()
     print_row(row, "handheld floors (0.1 m, 0.2 m, 0.1 m/s)")
     print()
     default_row = walk_row(Config())

@@ -63,3 +63,35 @@ def test_walk_outages_close_within_the_textbook_figure_and_are_covered() -> None
     assert row["close_h_m"] <= bench.TARGET_H_M
     assert row["fixes_unused"] == 0
     assert row["cov95_h"] >= 0.95 and row["cov95_v"] >= 0.95
+
+
+def test_vertical_growth_recovers_a_closed_form_error() -> None:
+    """The outage's vertical error split into offset, velocity and acceleration: a drift
+    integrated numerically from a constant acceleration error and a start velocity error
+    (with a walking bounce on top) is fitted back to the closed form e0 + v t + a t^2 / 2."""
+    bench = _bench()
+    dt = 0.25
+    t = np.arange(0.0, 15.0 + 1e-9, dt)
+    v0, acc, e0 = -0.045, -0.0274, 0.02
+    vel = v0 + acc * t  # Euler-integrated position from the velocity
+    err = e0 + np.concatenate([[0.0], np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt)])
+    bounce = 0.02 * np.sin(2.0 * np.pi * 1.9 * t)
+    fit_e0, fit_v, fit_a = bench.vertical_growth(t, err + bounce)
+    assert abs(fit_a - acc) < 1e-3 and abs(fit_v - v0) < 5e-3 and abs(fit_e0 - e0) < 0.02
+    exact = bench.vertical_growth(t, err)
+    assert np.allclose(exact, (e0, v0, acc), atol=1e-9)
+    assert all(np.isnan(bench.vertical_growth(t[:2], err[:2])))
+
+
+def test_shifted_schedules_cover_the_walk() -> None:
+    """The --sliding schedules: first outages 5 s apart over one 45 s period; each shifted
+    schedule keeps the source's 15 s outages every 45 s, ending 45 s before the end."""
+    bench = _bench()
+    assert np.allclose(np.diff(bench.SLIDING_STARTS_S), 5.0)
+    assert bench.SLIDING_STARTS_S[-1] - bench.SLIDING_STARTS_S[0] < bench.OUTAGE_PERIOD_S
+    pos_t = np.arange(0.0, 134.0, 0.25)
+    walk = bench.Walk(*([np.zeros(1)] * 3), pos_t, *([np.zeros(len(pos_t))] * 8))
+    assert bench.outages(walk, 40.0) == [(40.0, 55.0), (85.0, 100.0)]
+    assert bench.outages(walk, 45.0) == [(45.0, 60.0)]  # the next would start 44 s from the end
+    assert bench.outages(walk, 20.0) == [(20.0, 35.0), (65.0, 80.0)]
+    assert bench.outages(walk) == [(25.0, 40.0), (70.0, 85.0)]
