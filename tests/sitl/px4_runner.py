@@ -198,9 +198,9 @@ def errors(track: Series, truth: Series, t0: float, t1: float) -> list[tuple[flo
     return out
 
 
-PX4_FLAGS = ("cs_aux_gpos", "cs_gps", "cs_fake_pos", "cs_inertial_dead_reckoning")
+PX4_FLAGS = ("cs_aux_gpos", "cs_fake_pos", "cs_inertial_dead_reckoning")
 """EKF2's control status flags followed (``estimator_status_flags``): the aux global
-position, GNSS, the fake position at the last known one, dead reckoning."""
+position, the fake position at the last known one, dead reckoning."""
 
 
 def px4_flags(workdir: Path) -> dict[str, list[tuple[float, bool]]]:
