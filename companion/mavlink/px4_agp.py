@@ -18,9 +18,10 @@ gap's start until GNSS is trusted again (the encoder's ``feedback_guard``). Brid
 solution rests on PX4's attitude and IMU; fused back, PX4 corrects that attitude with it
 and the errors feed on themselves while each side takes the other for independent
 (reported on PX4 SIH before this guard: PX4 15-16 m off after a 20 s cut where it alone
-was 5 m off). A bridge on the raw IMU alone is no remedy with an autopilot-grade MEMS IMU: the
-blend coasting on its gyros without the autopilot's attitude was 350 m off after 60 s
-on the bundled cruise flight, against 8 m on the autopilot's attitude.
+was 5 m off). ArduPilot's remedy (bridge on the body rates, withdraw past 3 m) is none
+here: HIGHRES_IMU and ATTITUDE's rates are PX4's sensors less EKF2's own bias estimates,
+which move with what EKF2 fuses (on PX4 SIH, fed so through a 20 s cut, PX4 was 1.5-3.4 m
+off on average against 0.8-1.2 m alone; docs/mavlink.md).
 
 PX4 sends an INT32 parameter *bytewise* (the float's four bytes are the integer's:
 MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE), not C-cast as ArduPilot does.

@@ -13,7 +13,7 @@ from companion.config import Config
 from companion.mavlink.encode import EncoderConfig
 from companion.mavlink.px4_agp import RETRY_S, Px4AgpSetup, px4_int
 from companion.pipeline import Pipeline
-from companion.types import AutopilotFlavour, NavMode
+from companion.types import AutopilotFlavour, FixType, NavMode
 from tests.mavlink._util import Packer, attitude, heartbeat
 from tests.mavlink.test_encode import solution
 
@@ -121,6 +121,10 @@ def test_no_feed_to_px4_from_a_gap_until_gnss_is_trusted() -> None:
         msgs = enc.encode(replace(solution(), mode=mode), AutopilotFlavour.PX4)
         assert [m.get_type() for m in msgs] == ["GLOBAL_POSITION_INT", "GLOBAL_POSITION_SENSOR"]
     assert enc.held["feedback_guard"] == 3
+    # PX4 ignores the flags: a solution without a fix is never sent to it
+    msgs = enc.encode(replace(solution(), fix_type=FixType.NO_GPS), AutopilotFlavour.PX4)
+    assert [m.get_type() for m in msgs] == ["GLOBAL_POSITION_INT"]
+    assert enc.held["no_fix"] == 1
     # fusion off: PX4 ignores it, nothing to guard (and it is said: CMP AP_CONFIG)
     off, pk2, _ = _pipeline_on_px4()
     off.on_message(_param(pk2, "EKF2_AGP0_ID", 2), 1.1)

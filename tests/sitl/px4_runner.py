@@ -198,40 +198,103 @@ def errors(track: Series, truth: Series, t0: float, t1: float) -> list[tuple[flo
     return out
 
 
-def px4_aux_fused(workdir: Path) -> list[tuple[float, bool]]:
-    """PX4's EKF2 using the aux global position (``cs_aux_gpos``) as it changed, (t_s, on),
-    from the flight log PX4 wrote (empty when none could be read)."""
+PX4_FLAGS = ("cs_aux_gpos", "cs_fake_pos", "cs_inertial_dead_reckoning")
+"""EKF2's control status flags followed (``estimator_status_flags``): the aux global
+position, the fake position at the last known one, dead reckoning."""
+
+
+def px4_flags(workdir: Path) -> dict[str, list[tuple[float, bool]]]:
+    """Each of :data:`PX4_FLAGS` as it changed, ``{flag: [(t_s, on), ...]}``, from the
+    flight log PX4 wrote (empty when none could be read)."""
     try:
         from pyulog import ULog
     except ImportError:
-        return []
+        return {}
     logs = sorted((workdir / "px4-work" / "log").glob("*/*.ulg"))
     if not logs:
-        return []
+        return {}
     try:
         ulog = ULog(str(logs[-1]), ["estimator_status_flags"])
     except (OSError, ValueError, IndexError, KeyError, EOFError):
-        return []
+        return {}
+    out: dict[str, list[tuple[float, bool]]] = {}
     for data in ulog.data_list:
-        if data.multi_id == 0 and "cs_aux_gpos" in data.data:
-            t_s = data.data["timestamp"] * 1e-6
-            on = data.data["cs_aux_gpos"]
-            return [
-                (float(t_s[i]), bool(on[i])) for i in range(len(on)) if i == 0 or on[i] != on[i - 1]
-            ]
-    return []
+        if data.multi_id != 0:
+            continue
+        t_s = data.data["timestamp"] * 1e-6
+        for flag in PX4_FLAGS:
+            if flag in data.data:
+                on = data.data[flag]
+                out[flag] = [
+                    (float(t_s[i]), bool(on[i]))
+                    for i in range(len(on))
+                    if i == 0 or on[i] != on[i - 1]
+                ]
+    return out
+
+
+def px4_biases(workdir: Path, times: list[float]) -> dict[str, list[list[float]]]:
+    """EKF2's accelerometer (m/s^2) and gyro (rad/s) bias estimates at ``times``
+    (``estimator_sensor_bias``, from PX4's flight log): HIGHRES_IMU and ATTITUDE's body rates
+    are PX4's sensors less these, so what PX4 learns from a fused input moves them."""
+    try:
+        from pyulog import ULog
+    except ImportError:
+        return {}
+    logs = sorted((workdir / "px4-work" / "log").glob("*/*.ulg"))
+    if not logs:
+        return {}
+    try:
+        ulog = ULog(str(logs[-1]), ["estimator_sensor_bias"])
+    except (OSError, ValueError, IndexError, KeyError, EOFError):
+        return {}
+    out: dict[str, list[list[float]]] = {}
+    for data in ulog.data_list:
+        if data.multi_id != 0:
+            continue
+        t_s = [float(t) * 1e-6 for t in data.data["timestamp"]]
+        for name in ("accel_bias", "gyro_bias"):
+            cols = [data.data.get(f"{name}[{k}]") for k in range(3)]
+            if any(c is None for c in cols):
+                continue
+            rows = []
+            for t in times:
+                i = max(bisect.bisect_right(t_s, t) - 1, 0)
+                rows.append([round(float(c[i]), 6) for c in cols])  # type: ignore[index]
+            out[name] = rows
+    return out
 
 
 def summary(errs: list[tuple[float, float]]) -> dict[str, float | int]:
-    vals = [e for _, e in errs]
+    vals = sorted(e for _, e in errs)
     if not vals:
-        return {"n": 0, "mean_m": math.nan, "max_m": math.nan}
-    return {"n": len(vals), "mean_m": statistics.fmean(vals), "max_m": max(vals)}
+        return {"n": 0, "mean_m": math.nan, "p95_m": math.nan, "max_m": math.nan}
+    p95 = vals[min(len(vals) - 1, math.ceil(0.95 * len(vals)) - 1)]
+    return {"n": len(vals), "mean_m": statistics.fmean(vals), "p95_m": p95, "max_m": vals[-1]}
+
+
+def series(
+    errs: dict[str, list[tuple[float, float]]], t0: float, t1: float, step_s: float = 0.5
+) -> list[list[float]]:
+    """``[t - t0, value of each of errs (the latest at or before), ...]`` every ``step_s``."""
+    rows = []
+    t = t0
+    while t < t1:
+        row = [round(t - t0, 2)]
+        for samples in errs.values():
+            times = [s[0] for s in samples]
+            i = bisect.bisect_right(times, t) - 1
+            row.append(round(samples[i][1], 3) if i >= 0 and t - times[i] <= 1.5 else math.nan)
+        rows.append(row)
+        t += step_s
+    return rows
 
 
 def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[str, Any]:
     truth, px4_est, svc = Series(), Series(), Series()
     svc_eph: dict[float, float] = {}
+    sensor = Series()
+    """The GLOBAL_POSITION_SENSORs sent to PX4 (their eph by time in ``svc_eph``)."""
     svc_hacc = Series()
     """The service's CMP_HACC (1-sigma horizontal accuracy, m) in its ``lat`` column."""
     svc_ids: set[int] = set()
@@ -252,6 +315,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
             svc_hacc.add(msg.time_boot_ms * 1e-3, float(msg.value), 0.0)
         elif kind == "GLOBAL_POSITION_SENSOR":
             svc_eph[round(msg.time_usec * 1e-6, 3)] = float(msg.eph)
+            sensor.add(msg.time_usec * 1e-6, msg.lat * 1e-7, msg.lon * 1e-7)
             svc_ids.add(int(msg.id))
         elif kind == "STATUSTEXT":
             text, sid = msg.text, int(getattr(msg, "id", 0) or 0)
@@ -274,9 +338,12 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     service_tap = Listener(f"udpin:127.0.0.1:{SERVICE_TAP_PORT}", on_service)
     start_px4(procs, params, instance)
     master = f"udpin:127.0.0.1:{COMPANION_PORT + instance}"
-    harness.start_companion(
-        procs, {"link": {"master": master, "gcs": f"udpout:127.0.0.1:{SERVICE_TAP_PORT}"}}
-    )
+    sections: dict[str, dict[str, Any]] = {
+        "link": {"master": master, "gcs": f"udpout:127.0.0.1:{SERVICE_TAP_PORT}"}
+    }
+    if args.engine:
+        sections["engine"] = dict(args.engine)
+    harness.start_companion(procs, sections)
     gcs = GroundStation(PX4_GCS_URL)
     gcs.target_system = instance + 1  # PX4's MAV_SYS_ID is its instance + 1
 
@@ -308,7 +375,9 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         truth_tap.close()
         service_tap.close()
     procs.stop("px4")  # its flight log complete
-    aux = px4_aux_fused(procs.workdir)
+    flags = px4_flags(procs.workdir)
+    biases = px4_biases(procs.workdir, [t_cut, t_back])
+    aux = flags.get("cs_aux_gpos", [])
     pre0 = max(t_cut - args.pre_window_s, 0.0)
     px4_pre = errors(px4_est, truth, pre0, t_cut)
     px4_cut = errors(px4_est, truth, t_cut, t_back)
@@ -323,6 +392,11 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         if i >= 0 and t - svc_hacc.t[i] <= 1.5:
             acc = svc_hacc.lat[i]
             covered.append((t, e, acc, e <= COVER_95_2D * acc))
+    # what PX4 was given: each GLOBAL_POSITION_SENSOR's error against its eph (1-sigma)
+    sent = [
+        (t, e, svc_eph.get(round(t, 3), math.nan)) for t, e in errors(sensor, truth, pre0, t_end)
+    ]
+    sent_cut = [(t, e, eph) for t, e, eph in sent if t_cut <= t < t_back]
     pre_max = max((e for _, e in px4_pre), default=math.nan)
     # when PX4's error is back under its pre-cut maximum for good, s after GNSS returned
     back_under_s = math.nan
@@ -339,6 +413,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         "px4_cut": summary(px4_cut),
         "px4_after": summary(px4_after),
         "px4_back_under_pre_max_s": back_under_s,
+        "px4_after_2s": summary(errors(px4_est, truth, t_back, t_back + 2.0)),
         "service_cut": summary(errors(svc, truth, t_cut, t_back)),
         "service_cover_95": (
             sum(1 for c in covered if c[3]) / len(covered) if covered else math.nan
@@ -349,11 +424,38 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         "service_sensor_in_cut": sum(1 for t in svc_eph if t_cut + 1.5 <= t < t_back),
         "service_sensor_before_cut": sum(1 for t in svc_eph if pre0 <= t < t_cut),
         "px4_aux_fused": aux,
+        "px4_flags": flags,
+        "px4_biases_at_cut_and_back": biases,
+        "sensor_cover_95": (
+            sum(1 for _, e, eph in sent if e <= COVER_95_2D * eph) / len(sent) if sent else math.nan
+        ),
+        "sensor_n": len(sent),
+        "sensor_last_in_cut_s": (sent_cut[-1][0] - t_cut) if sent_cut else math.nan,
+        "sensor_cut": summary([(t, e) for t, e, _ in sent_cut]),
+        "sensor_eph_max_in_cut_m": max((eph for _, _, eph in sent_cut), default=math.nan),
+        "series_cols": ["t_from_cut_s", "px4_err_m", "service_err_m", "service_hacc_m"],
+        "series": series(
+            {
+                "px4": errors(px4_est, truth, pre0, t_end),
+                "svc": svc_all,
+                "hacc": list(zip(svc_hacc.t, svc_hacc.lat, strict=True)),
+            },
+            t_cut - 2.0,
+            t_end,
+        ),
         "service_alerts": alerts,
         "px4_statustexts": statustexts[-40:],
         "truth_n": len(truth.t),
         "truth_climb_m": (max(truth_alt_m) - truth_alt_m[0]) if truth_alt_m else math.nan,
     }
+
+
+def _key_value(text: str) -> tuple[str, float | str]:
+    key, _, value = text.partition("=")
+    try:
+        return key, float(value)
+    except ValueError:
+        return key, value
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -365,6 +467,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pre-window-s", type=float, default=10.0)
     ap.add_argument("--cut-s", type=float, default=20.0)
     ap.add_argument("--after-s", type=float, default=10.0)
+    ap.add_argument(
+        "--engine",
+        action="append",
+        type=_key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="an [engine] setting of the service (a number or a word), repeatable",
+    )
     ap.add_argument("--keep", type=Path, default=None, help="run in this folder, keep it")
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args(argv)

@@ -62,6 +62,7 @@ _PX4 = AutopilotFlavour.PX4
 FEEDBACK_HOLD_MODES = frozenset({NavMode.BRIDGING, NavMode.LOST, NavMode.REACQUIRING})
 """With :attr:`Encoder.feedback_guard`: modes in which PX4 gets no GLOBAL_POSITION_SENSOR
 (from GNSS lost until GNSS is trusted again)."""
+_NO_FIX = int(FixType.NO_FIX)
 _DEGE7_PER_RAD = units.DEGE7_PER_RAD
 _MM_PER_M = units.MM_PER_M
 _CM_PER_M = units.CM_PER_M
@@ -154,7 +155,7 @@ class Encoder:
         self.dropped: collections.Counter[str] = collections.Counter()
         self.held: collections.Counter[str] = collections.Counter()
         """GLOBAL_POSITION_SENSORs held back from PX4, by reason (``agp_id_unknown``,
-        ``feedback_guard``)."""
+        ``feedback_guard``, ``no_fix``)."""
         self._gpi_cls = self._mod.MAVLink_global_position_int_message
         self._gps_input_cls = self._mod.MAVLink_gps_input_message
         self.agp_id: int | None = None
@@ -389,8 +390,16 @@ class Encoder:
                     ),
                 )
             )
-        elif self.agp_hold or (self.feedback_guard and sol.mode in FEEDBACK_HOLD_MODES):
-            self.held["agp_id_unknown" if self.agp_hold else "feedback_guard"] += 1
+        elif self.agp_hold:
+            self.held["agp_id_unknown"] += 1
+            return out
+        elif self.feedback_guard and sol.mode in FEEDBACK_HOLD_MODES:
+            self.held["feedback_guard"] += 1
+            return out
+        elif sol.fix_type <= _NO_FIX:
+            # PX4 ignores the message's flags and fuses whatever position comes: a solution
+            # without a fix (integrity lost, navigation lost) is not sent
+            self.held["no_fix"] += 1
             return out
         else:
             healthy = sol.fix_type >= _FIX_3D
