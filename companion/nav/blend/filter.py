@@ -299,7 +299,6 @@ class BlendNavigator:
             p[:, 12:15] = 0.0
             p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
             log.info("autopilot attitude taken again")
-            self._follow_unaided()
 
     def attitude_unaided(self, unaided: bool) -> None:
         """``unaided``: a GNSS gap the autopilot shares (its GNSS is ours). Its attitude,
