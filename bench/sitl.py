@@ -72,6 +72,16 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
         f"  GNSS_LOST {_latency(outage['gnss_lost_latency_s'])} after the GPS went off, "
         f"GNSS_BACK {_latency(outage['gnss_back_latency_s'])} after it returned"
     )
+    print(
+        f"  over the outage the service was beyond 2.45 x its published 1-sigma in "
+        f"{outage['service_beyond_coverage']} of {outage['service_with_accuracy']} positions"
+    )
+    per_second = outage.get("service_per_second") or []
+    if per_second:
+        print("  outage second: the service's error / 2.45 x its published 1-sigma, m")
+        for k in range(0, len(per_second), 6):
+            row = per_second[k : k + 6]
+            print("    " + "  ".join(f"{s:4.0f} s {e:5.1f}/{2.45 * h:5.1f}" for s, e, h in row))
     unwanted = [(t, a) for t, a in healthy["alerts"] if a.split()[1] in UNWANTED]
     print(f"  unwanted alerts in the healthy cruise: {len(unwanted)}")
     for t, a in unwanted[:10]:

@@ -508,13 +508,15 @@ class Engine:
 
     def _on_attitude(self, sample: AttitudeSample) -> list[Output]:
         gap_attitude = self.config.gap_attitude
+        in_gap = self.outage.mode in OUTAGE_MODES
         if gap_attitude != "autopilot":
             # through a gap, an autopilot fusing our output corrects its attitude with it
             # (and after the fix is withdrawn, that attitude still carries it)
             self.navigators.hold_attitude(
-                self.outage.mode in OUTAGE_MODES
-                and (gap_attitude == "rates" or self.autopilot_fuses_output)
+                in_gap and (gap_attitude == "rates" or self.autopilot_fuses_output)
             )
+        # the autopilot's GNSS is ours: through our gap its attitude is unaided too
+        self.navigators.attitude_unaided(in_gap)
         self._yaw_rad = sample.yaw_rad
         self._attitude = sample
         self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?

@@ -221,14 +221,22 @@ def score_flight(
         # each error against the accuracy published last at or before it
         acc_t = [t for t, _ in tap.accuracies]
         acc_m = [h for _, h in tap.accuracies]
-        errs = [
-            (e, acc_m[i - 1])
+        timed = [
+            (t, e, acc_m[i - 1])
             for t, e in zip(*_timed_errors(log, service, t_off, t_on), strict=True)
             if (i := bisect.bisect_right(acc_t, t)) > 0
         ]
+        errs = [(e, h) for _, e, h in timed]
         out["outage"]["service_h_acc_m_max"] = max((h for _, h in errs), default=None)
         out["outage"]["service_beyond_coverage"] = sum(e > COVERAGE_K * h for e, h in errs)
         out["outage"]["service_with_accuracy"] = len(errs)
+        # per whole second of the outage: the first position at or after it, its error
+        # and the 1-sigma published with it
+        per_second: list[tuple[float, float, float]] = []
+        for t, e, h in timed:
+            if not per_second or t - t_off >= per_second[-1][0] + 1.0:
+                per_second.append((float(math.floor(t - t_off)), e, h))
+        out["outage"]["service_per_second"] = per_second
         out["after"] = {
             "service": _stats(log.errors(service, t_on + 5.0, t_end_s)),
             "autopilot": _stats(log.errors(log.autopilot, t_on + 5.0, t_end_s)),

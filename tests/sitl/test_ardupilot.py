@@ -122,6 +122,26 @@ def test_plane_gps_outage(plane_flight: dict[str, Any]) -> None:
     _assert_outage_announced(outage)
 
 
+@pytest.mark.parametrize("flight", ["plane_flight", "plane_alone"])
+def test_plane_gps_outage_accuracy_covers_the_error(
+    flight: str, request: pytest.FixtureRequest
+) -> None:
+    """Never confidently wrong: over the 30 s outage, the autopilot not fed, 95 % of the
+    service's positions lie within 2.45 times its published 1-sigma (GPS_INPUT
+    ``horiz_accuracy``) of the truth. The autopilot's heading, unaided by GNSS in the
+    gap it shares, turned 0.7 to 1.9 deg off in the 60 s-cruise flight; modelled as an
+    aided 0.5 deg it left 190 of 300 positions outside (docs/sitl.md)."""
+    outage = request.getfixturevalue(flight)["outage"]
+    n = outage["service_with_accuracy"]
+    assert n > 0.8 * 10 * OUTAGE_S
+    assert outage["service_beyond_coverage"] <= 0.05 * n, (
+        outage["service_beyond_coverage"],
+        n,
+        outage["service"],
+        outage["service_h_acc_m_max"],
+    )
+
+
 FEED_CRUISE_S = 60.0
 """The flights comparing the autopilot alone and fed: a shorter cruise than the healthy
 tests' (the outage falls in the same place of the circuit in both)."""

@@ -60,6 +60,8 @@ _F_VARIABLE_ENTRIES = [(3, 7), (3, 8), (4, 6), (4, 8), (5, 6), (5, 7)] + _block(
 """Entries of F that change per segment: skew(f) (off-diagonal) and -C (see f_filled)."""
 _F_STRAPDOWN_ENTRIES = _block(6, 12)
 """Strapdown: the C block of the attitude error's gyro-bias coupling."""
+_F_UNAIDED_ENTRIES = [(ins.IA + 2, ins.IBG + j) for j in range(3)]
+"""Attitude-aided, unaided (:meth:`ErrorModel.set_unaided`): the heading row of that block."""
 
 
 class ErrorModel:
@@ -76,6 +78,7 @@ class ErrorModel:
         cfg = config
         self._cfg = cfg
         self._strapdown = cfg.mode == "strapdown"
+        self._unaided = False
         self._van_loan = cfg.cov_discretisation == "van_loan"
         self._gqg_static = self._static_gqg(cfg)
         self._f_template = np.zeros((N_STATE, N_STATE))
@@ -104,18 +107,41 @@ class ErrorModel:
         accelerometer PSD and the receiver-error block are kept."""
         if strapdown is self._strapdown:
             return
-        cfg = self._cfg
         self._strapdown = strapdown
+        self._rebuild()
+
+    def set_unaided(self, unaided: bool) -> None:
+        """Attitude-aided mode: model the autopilot's heading error as unaided (``True``:
+        a GNSS gap it shares) or aided (``False``). Unaided, nothing pulls the heading
+        error back: no Gauss-Markov decay about down; the same white noise drives it, and
+        the bias of the autopilot's body rates (the gyro-bias states) turns it, as a
+        strapdown's heading. Its tilt keeps the Gauss-Markov model: an autopilot still
+        levels on gravity without GNSS, while its heading in flight is held by the GNSS
+        velocity. No effect in strapdown mode."""
+        if unaided is self._unaided:
+            return
+        self._unaided = unaided
+        self._rebuild()
+
+    def _rebuild(self) -> None:
+        """F's constant entries and the static noise after a change of attitude model."""
+        cfg = self._cfg
         self._gqg_static = self._static_gqg(cfg)
         self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
             np.zeros(3),
             np.zeros((3, 3)),
-            strapdown=strapdown,
+            strapdown=self._strapdown,
             tau_att_s=cfg.att_err_tau_s,
             tau_ba_s=cfg.accel_bias_tau_s,
             tau_bg_s=cfg.gyro_bias_tau_s,
         )
-        self._f_idx = _flat_index(_F_VARIABLE_ENTRIES + (_F_STRAPDOWN_ENTRIES if strapdown else []))
+        entries = list(_F_VARIABLE_ENTRIES)
+        if self._strapdown:
+            entries += _F_STRAPDOWN_ENTRIES
+        elif self._unaided:
+            self._f_template[ins.IA + 2, ins.IA + 2] = 0.0  # no pull back about down
+            entries += _F_UNAIDED_ENTRIES
+        self._f_idx = _flat_index(entries)
         self.gqg = self._make_gqg()
 
     def _static_gqg(self, cfg: BlendConfig) -> FloatArray:
@@ -179,6 +205,8 @@ class ErrorModel:
         values = [-f2, f1, f2, -f0, -f1, f0, -c00, -c01, -c02, -c10, -c11, -c12, -c20, -c21, -c22]
         if self._strapdown:
             values += mat_nb
+        elif self._unaided:
+            values += (c20, c21, c22)
         # one indexed assignment instead of a dozen element writes
         self._f_flat[self._f_idx] = values
         return self._f_template

@@ -33,6 +33,7 @@ from companion.nav.blend.history import (
 from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.rate_drift import RateDrift
 from companion.nav.blend.receiver import ReceiverError
+from companion.nav.blend.unaided import UnaidedDeparture
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.imu_check import ImuNoiseCheck, ImuNoiseVerdict
 from companion.nav.kalman import chi2_gate, joseph_update_diag_r, predict_covariance
@@ -128,6 +129,15 @@ class BlendNavigator:
         """While held: the autopilot's two latest body rates ``(t_s, rad/s)``, integrated
         instead of the IMU's gyros."""
         self._bg_before_hold: list[float] | None = None
+        self.attitude_unaided_flag = False
+        """A GNSS gap the autopilot shares: its attitude is modelled as unaided
+        (:meth:`attitude_unaided`)."""
+        self._unaided_on = False
+        """The unaided model is in force (attitude-aided mode, the attitude taken)."""
+        self._bg_before_unaided: list[float] | None = None
+        self.departure = UnaidedDeparture()
+        """Through an unaided gap: how far the autopilot's heading departs from its
+        rates."""
         self._model = ErrorModel(self.config)
         self._model.set_gyro_psd(self._gyro_psd_measured)
         self._mech = ins.Mechanisation(ins.LocalGravity(self._frame.lat0_rad, self._frame.alt0_m))
@@ -254,6 +264,8 @@ class BlendNavigator:
         self.attitude_held = hold
         if self.config.mode == "strapdown" or self._own_attitude:
             return
+        if hold:
+            self._leave_unaided()
         self._strapdown = hold
         self._model.set_strapdown(hold)
         if not self._init:
@@ -288,6 +300,62 @@ class BlendNavigator:
             p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
             log.info("autopilot attitude taken again")
 
+    def attitude_unaided(self, unaided: bool) -> None:
+        """``unaided``: a GNSS gap the autopilot shares (its GNSS is ours). Its attitude,
+        still taken, is no longer aided by GNSS: its heading error is modelled without the
+        Gauss-Markov pull back (:meth:`ErrorModel.set_unaided`), turned by the bias of its
+        body rates (the gyro-bias states restart at the variance :attr:`rate_drift`
+        bounds, plus ``gyro_instability_radps`` squared, as when the rates carry the
+        attitude) and widened by how far its heading departs from those rates
+        (:mod:`.unaided`). ``False``: the aided model again; the attitude error's
+        covariance is kept for the fixes to shrink. Only in attitude-aided mode with the
+        autopilot's attitude taken (not held, not strapdown, not the blend's own)."""
+        self.attitude_unaided_flag = unaided
+        self._follow_unaided()
+
+    def _follow_unaided(self) -> None:
+        want = (
+            self.attitude_unaided_flag
+            and self._init
+            and not self._strapdown
+            and not self._own_attitude
+            and not self.attitude_held
+        )
+        if want and not self._unaided_on:
+            self._enter_unaided()
+        elif not want:
+            self._leave_unaided()
+
+    def _enter_unaided(self) -> None:
+        self._unaided_on = True
+        self._model.set_unaided(True)
+        mech = self._mech
+        self._bg_before_unaided = list(mech.bg)
+        p = self._p
+        p[12:15, :] = 0.0
+        p[:, 12:15] = 0.0
+        var = self.rate_drift.bias_variance() or [0.0, 0.0, 0.0]
+        floor = self.config.gyro_instability_radps**2
+        p[12:15, 12:15] = np.diag([v + floor for v in var])
+        self.departure.start(self.rate_drift.mean_rate())
+        log.info(
+            "GNSS gap: the autopilot's heading modelled unaided (its rates' bias 1-sigma %s deg/s)",
+            [round(math.degrees(math.sqrt(v + floor)), 4) for v in var],
+        )
+
+    def _leave_unaided(self) -> None:
+        if not self._unaided_on:
+            return
+        self._unaided_on = False
+        self._model.set_unaided(False)
+        if self._bg_before_unaided is not None:
+            self._mech.bg = self._bg_before_unaided
+            self._bg_before_unaided = None
+        p = self._p
+        p[12:15, :] = 0.0
+        p[:, 12:15] = 0.0
+        p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
+
     def on_attitude(self, sample: AttitudeSample, yaw_correction_rad: float) -> None:
         """Take the autopilot's attitude (yaw less ``yaw_correction_rad``).
 
@@ -307,6 +375,11 @@ class BlendNavigator:
         self._att_t_s = sample.t_s
         rates = sample.rate_b_radps.tolist()
         if len(rates) == 3 and math.isfinite(sum(rates)):
+            if self._unaided_on:
+                # its heading's departure from its rates: a correction of unknown quality
+                self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_sample(
+                    sample.t_s, self._att_q, rates
+                )
             if not self.attitude_held:
                 if yaw_correction_rad != self._rate_drift_yaw_corr:
                     self._rate_drift_yaw_corr = yaw_correction_rad

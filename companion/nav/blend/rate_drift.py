@@ -82,6 +82,14 @@ class RateDrift:
         self._n = k * self._n + 1.0
         self._n2 = k * k * self._n2 + 1.0
 
+    def mean_rate(self) -> list[float] | None:
+        """Per body axis, the mean rate (rad/s) at which the attitude strayed from the
+        rates: what the autopilot's aiding corrected them by. None before any residual."""
+        span = self._span_s
+        if span <= 0.0:
+            return None
+        return [self._sum_r[i] / span for i in range(3)]
+
     def bias_variance(self) -> list[float] | None:
         """Per body axis, the variance ((rad/s)^2) of the rates' bias the residuals show:
         their mean rate squared plus the variance of that mean (its scatter over the
