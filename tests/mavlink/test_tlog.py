@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from companion.mavlink.tlog import TlogError, TlogReader, TlogWriter, read_tlog
+from companion.mavlink.tlog import TlogError, TlogReader, TlogWriter, foreign_format, read_tlog
 from tests.mavlink._util import Packer, attitude, gps_raw, raw_imu
 
 T0 = 1_700_000_000.0
@@ -136,7 +136,10 @@ def test_recording_clock_step_is_followed(tmp_path: Path) -> None:
 
 
 @settings(
-    max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
 @given(st.data())
 def test_fuzzed_tlogs_never_crash(tmp_path: Path, data: st.DataObject) -> None:
@@ -147,8 +150,12 @@ def test_fuzzed_tlogs_never_crash(tmp_path: Path, data: st.DataObject) -> None:
     cut = data.draw(st.integers(0, len(blob)))
     path = tmp_path / "f.tlog"
     path.write_bytes(bytes(blob[:cut]) + data.draw(st.binary(max_size=40)))
-    r = TlogReader(path)
-    got = list(r)
+    try:
+        got = list(TlogReader(path))
+    except TlogError:
+        # only a file that starts like another format (a zip, a gzip...) is refused whole
+        assert foreign_format(path.read_bytes()[:16]) is not None
+        return
     assert len(got) <= 20 + 2
     assert all(isinstance(t, float) for t, _ in got)
 
