@@ -1,8 +1,7 @@
 """Tracking the aircraft from a ground station: azimuth, elevation, range and their rates.
 
 The θ-θ channel of "Tracking with the aircraft's kinematic and dynamic parameters":
-a constant-acceleration filter whose acceleration changes by white noise, updated
-with two observations (the paper's z1, z2):
+an acceleration-state filter updated with two observations (the paper's z1, z2):
 
     z1(k) = r(k) + v1(k)                  the reported position
     z2(k) = a(k) + C_nb b + v2(k)         the aircraft's acceleration from its own
@@ -14,7 +13,13 @@ where both observations are linear; the angles, their rates and their
 accelerations are exact functions of (r, v, a) (:func:`spherical_rates`), so the
 angular-acceleration observation carries the same information without the
 linearisation of its velocity terms (2 β̇ ρ̇/ρ and the like) about the filter's
-own rates. Two additions the real telemetry needs:
+own rates. The acceleration is Singer's (mean-reverting, stationary 1σ σ_m) but
+driven by a first-order Markov jerk instead of white noise: between two z2
+samples a white-driven acceleration is a Brownian bridge, which leaves the
+velocity wandering and keeps the channel well above a filter told the
+acceleration; a smooth one lets z2 carry it (the channel's steady-state position
+σ is then within 1.2× (1 Hz) and 1.05× (5 Hz) of that filter's, from 1.4×).
+Two additions the real telemetry needs:
 
 * ``b``: a body-frame bias of the acceleration observation (a tilt offset between
   ATTITUDE and the accelerometer, an accelerometer bias), a slow random walk;
@@ -60,11 +65,13 @@ _I3 = np.eye(3)
 class TrackerConfig:
     """Noise model of the tracking filters (SI units, 1σ).
 
-    The motion model is the same for the dynamic channel and Singer's (σ_m, τ:
-    Singer's values for an evasive manoeuvre, not fitted): they differ only by
-    the second observation. The measurement noises are the telemetry's
-    (defaults: an autopilot's estimate over a radio link, see
-    ``bench/tracking.py``'s realistic profile), the same for every model.
+    The dynamic channel and Singer's share the manoeuvre model (σ_m, τ: Singer's
+    values for an evasive manoeuvre, not fitted); the dynamic channel's
+    acceleration changes through a jerk of correlation time ``jerk_tau_s`` (an
+    aircraft's roll response, not fitted) scaled to the same stationary σ_m, so
+    that without z2 it predicts the same manoeuvre amplitude. The measurement
+    noises are the telemetry's (defaults: an autopilot's estimate over a radio
+    link, see ``bench/tracking.py``'s realistic profile), the same for every model.
     """
 
     pos_sigma_m: float = 0.7
