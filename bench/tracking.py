@@ -65,6 +65,7 @@ import math
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -236,7 +237,7 @@ def _run(
     }
 
 
-ABLATIONS: dict[str, dict[str, float]] = {
+ABLATIONS: dict[str, dict[str, Any]] = {
     "as is": {},
     "no wander": {"pos_gm_m": 0.0},
     "IMU 0.05": {"f_white_mps2": 0.05},
