@@ -263,7 +263,7 @@ def _jerk_unit(dt: float, tau_a_s: float, tau_j_s: float) -> tuple[FloatArray, F
 
 @functools.lru_cache(maxsize=1024)
 def _transition(model: Model, dt: float, cfg: TrackerConfig) -> tuple[FloatArray, FloatArray]:
-    """(F, Q) over ``dt`` for the state [r, v, (a), (b), e], 3 axes each (cached)."""
+    """(F, Q) over ``dt`` for the state [r, v, (a), (j), (b), e], 3 axes each (cached)."""
     if model == "cv":
         f1 = np.array([[1.0, dt], [0.0, 1.0]])
         q1 = Q_continuous_white_noise(2, dt, cfg.cv_acc_psd)
@@ -368,7 +368,7 @@ class Tracker:
     def _start(self, t_s: float, pos_ned_m: FloatArray, r: FloatArray) -> None:
         x = np.zeros((self._dim, 1))
         x[0:3, 0] = pos_ned_m
-        # rates unknown at the first fix: ~100 m/s and ~10 m/s²
+        # rates unknown at the first fix: ~100 m/s, ~10 m/s², the jerk at its stationary 1σ
         jerk2 = self.cfg.jerk_sigma_mps3**2
         p = [np.diag(r), 100.0**2 * _I3, 10.0**2 * _I3, jerk2 * _I3][: self._order]
         if self.model == "dynamic":
