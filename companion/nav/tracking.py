@@ -238,6 +238,12 @@ def _singer_unit(dt: float, tau_s: float) -> tuple[FloatArray, FloatArray]:
     return f, q
 
 
+_JERK_STEP_S = 0.5
+"""Longest interval discretised at once: van Loan's block exponential of the stiff jerk
+model (-1/τ_j against t⁵ growth) loses the positive definiteness of Q beyond a few
+seconds; longer intervals are composed from halves."""
+
+
 @functools.lru_cache(maxsize=512)
 def _jerk_unit(dt: float, tau_a_s: float, tau_j_s: float) -> tuple[FloatArray, FloatArray]:
     """Transition and process noise of [r, v, a, j] for σ_j = 1 over ``dt`` (cached).
@@ -245,6 +251,15 @@ def _jerk_unit(dt: float, tau_a_s: float, tau_j_s: float) -> tuple[FloatArray, F
     ȧ = -a/τ_a + j, j̇ = -j/τ_j + w with E[w w] = 2 σ_j²/τ_j: Singer's mean-reverting
     acceleration driven by a smooth (first-order Markov) jerk instead of white noise.
     """
+    if dt > _JERK_STEP_S:
+        # two halves: F = F½ F½, Q = F½ Q½ F½ᵀ + Q½ (a sum of positive definite terms)
+        f2, q2 = _jerk_unit(0.5 * dt, tau_a_s, tau_j_s)
+        f = f2 @ f2
+        q = f2 @ q2 @ f2.T + q2
+        q = 0.5 * (q + q.T)
+        f.setflags(write=False)
+        q.setflags(write=False)
+        return f, q
     a_c = np.array(
         [
             [0.0, 1.0, 0.0, 0.0],
