@@ -1,8 +1,7 @@
 """Tracking the aircraft from a ground station: azimuth, elevation, range and their rates.
 
 The θ-θ channel of "Tracking with the aircraft's kinematic and dynamic parameters":
-a constant-acceleration filter whose acceleration changes by white noise, updated
-with two observations (the paper's z1, z2):
+an acceleration-state filter updated with two observations (the paper's z1, z2):
 
     z1(k) = r(k) + v1(k)                  the reported position
     z2(k) = a(k) + C_nb b + v2(k)         the aircraft's acceleration from its own
@@ -14,7 +13,13 @@ where both observations are linear; the angles, their rates and their
 accelerations are exact functions of (r, v, a) (:func:`spherical_rates`), so the
 angular-acceleration observation carries the same information without the
 linearisation of its velocity terms (2 β̇ ρ̇/ρ and the like) about the filter's
-own rates. Two additions the real telemetry needs:
+own rates. The acceleration is Singer's (mean-reverting, stationary 1σ σ_m) but
+driven by a first-order Markov jerk instead of white noise: between two z2
+samples a white-driven acceleration is a Brownian bridge, which leaves the
+velocity wandering and keeps the channel well above a filter told the
+acceleration; a smooth one lets z2 carry it (the channel's steady-state position
+σ is then within 1.2× (1 Hz) and 1.05× (5 Hz) of that filter's, from 1.4×).
+Two additions the real telemetry needs:
 
 * ``b``: a body-frame bias of the acceleration observation (a tilt offset between
   ATTITUDE and the accelerometer, an accelerometer bias), a slow random walk;
@@ -60,11 +65,13 @@ _I3 = np.eye(3)
 class TrackerConfig:
     """Noise model of the tracking filters (SI units, 1σ).
 
-    The motion model is the same for the dynamic channel and Singer's (σ_m, τ:
-    Singer's values for an evasive manoeuvre, not fitted): they differ only by
-    the second observation. The measurement noises are the telemetry's
-    (defaults: an autopilot's estimate over a radio link, see
-    ``bench/tracking.py``'s realistic profile), the same for every model.
+    The dynamic channel and Singer's share the manoeuvre model (σ_m, τ: Singer's
+    values for an evasive manoeuvre, not fitted); the dynamic channel's
+    acceleration changes through a jerk of correlation time ``jerk_tau_s`` (an
+    aircraft's roll response, not fitted) scaled to the same stationary σ_m, so
+    that without z2 it predicts the same manoeuvre amplitude. The measurement
+    noises are the telemetry's (defaults: an autopilot's estimate over a radio
+    link, see ``bench/tracking.py``'s realistic profile), the same for every model.
     """
 
     pos_sigma_m: float = 0.7
@@ -91,8 +98,21 @@ class TrackerConfig:
     """Dynamic: samples over which the z2 noise is estimated (forgetting factor 1/N)."""
     bias_sigma_mps2: float = 0.5
     """Dynamic: prior 1σ of the body-frame bias of z2 per axis, m/s²."""
-    bias_walk_psd: float = 1e-4
-    """Dynamic: random walk of that bias, m²/s⁵."""
+    bias_walk_psd: float = 1e-6
+    """Dynamic: random walk of that bias, m²/s⁵ (a mounting tilt, an accelerometer
+    bias: 0.03 m/s² over 1000 s)."""
+    jerk_tau_s: float = 0.3
+    """Dynamic: correlation time of the jerk, s (an aircraft's roll response); 0: no
+    jerk state, Singer's white-driven acceleration."""
+
+    @property
+    def jerk_sigma_mps3(self) -> float:
+        """Dynamic: 1σ of the jerk, m/s³, such that the acceleration's stationary 1σ is
+        Singer's σ_m: σ_a² = σ_j² τ_a² τ_j / (τ_a + τ_j) for ȧ = -a/τ_a + j."""
+        if self.jerk_tau_s <= 0.0:
+            return 0.0
+        tau_a, tau_j = self.singer_tau_s, self.jerk_tau_s
+        return self.singer_sigma_mps2 * math.sqrt((tau_a + tau_j) / (tau_a * tau_a * tau_j))
 
     @property
     def acc_sigma_floor_mps2(self) -> float:
@@ -218,23 +238,64 @@ def _singer_unit(dt: float, tau_s: float) -> tuple[FloatArray, FloatArray]:
     return f, q
 
 
+_JERK_STEP_S = 0.5
+"""Longest interval discretised at once: van Loan's block exponential of the stiff jerk
+model (-1/τ_j against t⁵ growth) loses the positive definiteness of Q beyond a few
+seconds; longer intervals are composed from halves."""
+
+
+@functools.lru_cache(maxsize=512)
+def _jerk_unit(dt: float, tau_a_s: float, tau_j_s: float) -> tuple[FloatArray, FloatArray]:
+    """Transition and process noise of [r, v, a, j] for σ_j = 1 over ``dt`` (cached).
+
+    ȧ = -a/τ_a + j, j̇ = -j/τ_j + w with E[w w] = 2 σ_j²/τ_j: Singer's mean-reverting
+    acceleration driven by a smooth (first-order Markov) jerk instead of white noise.
+    """
+    if dt > _JERK_STEP_S:
+        # two halves: F = F½ F½, Q = F½ Q½ F½ᵀ + Q½ (a sum of positive definite terms)
+        f2, q2 = _jerk_unit(0.5 * dt, tau_a_s, tau_j_s)
+        f = f2 @ f2
+        q = f2 @ q2 @ f2.T + q2
+        q = 0.5 * (q + q.T)
+        f.setflags(write=False)
+        q.setflags(write=False)
+        return f, q
+    a_c = np.array(
+        [
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, -1.0 / tau_a_s, 1.0],
+            [0.0, 0.0, 0.0, -1.0 / tau_j_s],
+        ]
+    )
+    g = np.array([[0.0], [0.0], [0.0], [math.sqrt(2.0 / tau_j_s)]])
+    f, q = van_loan_discretization(a_c, g, dt)
+    q = 0.5 * (q + q.T)
+    f.setflags(write=False)
+    q.setflags(write=False)
+    return f, q
+
+
 @functools.lru_cache(maxsize=1024)
 def _transition(model: Model, dt: float, cfg: TrackerConfig) -> tuple[FloatArray, FloatArray]:
-    """(F, Q) over ``dt`` for the state [r, v, (a), (b), e], 3 axes each (cached)."""
+    """(F, Q) over ``dt`` for the state [r, v, (a), (j), (b), e], 3 axes each (cached)."""
     if model == "cv":
         f1 = np.array([[1.0, dt], [0.0, 1.0]])
         q1 = Q_continuous_white_noise(2, dt, cfg.cv_acc_psd)
+    elif model == "dynamic" and cfg.jerk_sigma_mps3 > 0.0:
+        f1, q1 = _jerk_unit(dt, cfg.singer_tau_s, cfg.jerk_tau_s)
+        q1 = q1 * cfg.jerk_sigma_mps3**2
     else:
         f1, q1 = _singer_unit(dt, cfg.singer_tau_s)
         q1 = q1 * cfg.singer_sigma_mps2**2
     n = 3 * f1.shape[0]
-    dim = _dim(model)
+    dim = _dim(model, cfg)
     f = np.eye(dim)
     f[:n, :n] = np.kron(f1, _I3)
     q = np.zeros((dim, dim))
     q[:n, :n] = np.kron(q1, _I3)
     if model == "dynamic":
-        q[9:12, 9:12] = cfg.bias_walk_psd * dt * _I3
+        q[n : n + 3, n : n + 3] = cfg.bias_walk_psd * dt * _I3
     # the reported positions' wandering error: e' = -e/τ + w
     phi = math.exp(-dt / cfg.pos_gm_tau_s)
     f[dim - 3 :, dim - 3 :] = phi * _I3
@@ -244,9 +305,16 @@ def _transition(model: Model, dt: float, cfg: TrackerConfig) -> tuple[FloatArray
     return f, q
 
 
-def _dim(model: Model) -> int:
-    """State size: r, v (cv); r, v, a (singer); r, v, a, b (dynamic); then e."""
-    return {"cv": 6, "singer": 9, "dynamic": 12}[model] + 3
+def _order(model: Model, cfg: TrackerConfig) -> int:
+    """Kinematic states per axis: r, v (cv); r, v, a (singer); r, v, a, (j) (dynamic)."""
+    if model == "cv":
+        return 2
+    return 4 if model == "dynamic" and cfg.jerk_sigma_mps3 > 0.0 else 3
+
+
+def _dim(model: Model, cfg: TrackerConfig) -> int:
+    """State size: the kinematic states, then b (dynamic), then e; 3 axes each."""
+    return 3 * (_order(model, cfg) + (model == "dynamic") + 1)
 
 
 class Tracker:
@@ -270,8 +338,10 @@ class Tracker:
             raise ValueError(f"unknown tracking model {model!r} (known: {', '.join(MODELS)})")
         self.model: Model = model
         self.cfg = config or TrackerConfig()
-        self._order = 2 if model == "cv" else 3
-        self._dim = _dim(model)
+        self._order = _order(model, self.cfg)
+        self._dim = _dim(model, self.cfg)
+        self._bias = 3 * self._order
+        """Index of the bias b in the state (dynamic model)."""
         self.kf = KalmanFilter(dim_x=self._dim, dim_z=3)
         self.t_s: float | None = None
         self.t_position_s: float | None = None
@@ -288,6 +358,13 @@ class Tracker:
     @property
     def started(self) -> bool:
         return self.t_s is not None
+
+    @property
+    def bias_b_mps2(self) -> FloatArray:
+        """The estimated body-frame bias of z2, m/s² (zeros for the baselines)."""
+        if self.model != "dynamic" or self.t_s is None:
+            return np.zeros(3)
+        return np.asarray(self.kf.x[self._bias : self._bias + 3, 0], dtype=float).copy()
 
     def _fq(self, dt: float) -> tuple[FloatArray, FloatArray]:
         return _transition(self.model, round(dt, 6), self.cfg)
@@ -306,8 +383,9 @@ class Tracker:
     def _start(self, t_s: float, pos_ned_m: FloatArray, r: FloatArray) -> None:
         x = np.zeros((self._dim, 1))
         x[0:3, 0] = pos_ned_m
-        # rates unknown at the first fix: ~100 m/s and ~10 m/s²
-        p = [np.diag(r), 100.0**2 * _I3, 10.0**2 * _I3][: self._order]
+        # rates unknown at the first fix: ~100 m/s, ~10 m/s², the jerk at its stationary 1σ
+        jerk2 = self.cfg.jerk_sigma_mps3**2
+        p = [np.diag(r), 100.0**2 * _I3, 10.0**2 * _I3, jerk2 * _I3][: self._order]
         if self.model == "dynamic":
             p.append(self.cfg.bias_sigma_mps2**2 * _I3)
         p.append(self.cfg.pos_gm_sigma_m**2 * _I3)
@@ -365,7 +443,7 @@ class Tracker:
         h = np.zeros((3, self._dim))
         h[:, 6:9] = _I3
         if mat_nb is not None:
-            h[:, 9:12] = np.asarray(mat_nb, dtype=float)
+            h[:, self._bias : self._bias + 3] = np.asarray(mat_nb, dtype=float)
         # z2's noise by covariance matching of the innovations (Mohamed and Schwarz
         # 1999, eq. 20-28):
         # E[ν νᵀ] = H P⁻ Hᵀ + R; the plain mean of the first N samples, then a fading
@@ -393,7 +471,7 @@ class Tracker:
             x, p = kf_predict(x, p, f, q)
         r = x[0:3, 0]
         v = x[3:6, 0]
-        a = x[6:9, 0] if self._order == 3 else np.zeros(3)
+        a = x[6:9, 0] if self._order >= 3 else np.zeros(3)
         az, el, dist = ned_to_spherical(r)
         first, _ = spherical_rates(r, v, a)
         pr = p[0:3, 0:3]
