@@ -380,6 +380,12 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
     ("ENG_GAP_ATT", "engine.gap_attitude"),
     ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
+    ("ENG_SIL_NINT", "engine.silence_intervals"),
+    ("ENG_SIL_MAX", "engine.silence_timeout_max_s"),
+    ("OUT_SLOW_ENTER", "outage.slow_enter_s"),
+    ("OUT_SLOW_LEAVE", "outage.slow_leave_s"),
+    ("OUT_SLOW_MAXINT", "outage.slow_max_interval_s"),
+    ("OUT_GNSS_TMO_MAX", "outage.gnss_timeout_max_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
