@@ -19,6 +19,7 @@ import pytest
 
 from companion.config import load_config
 from companion.engine import Engine
+from companion.evaluate.against_input import evaluate_against_input
 from companion.nav.earth import gravity_mps2
 from companion.replay import replay
 from companion.types import (
@@ -130,9 +131,15 @@ def test_a_real_gap_in_a_slow_link_is_one_loss_and_one_return():
 def test_the_real_ground_station_recording_is_no_alert_storm(tmp_path):
     """The 1 Hz ground-station recording: 169 GNSS_LOST, 155 GNSS_BACK and 16 silences
     (each a navigation restart) before the rhythm was measured."""
-    summary = replay(PHOENIX, tmp_path / "out.tlog", load_config(None))
+    config = load_config(None)
+    summary = replay(PHOENIX, tmp_path / "out.tlog", config)
     counts = summary.alerts
     assert counts.get(AlertCode.GNSS_SLOW.value, 0) == 1
     assert counts.get(AlertCode.GNSS_LOST.value, 0) <= 25
     assert counts.get(AlertCode.NO_DATA.value, 0) <= 8
     assert sum(counts.values()) <= 60
+    # the receiver used (94 % with a restart per silence), every gap alerted in time
+    res = evaluate_against_input(tmp_path / "out.tlog", PHOENIX, config.decoder)
+    assert res.receiver_use.passed
+    assert res.gaps_summary.passed_alert
+    assert res.confidence.passed_wrong and res.confidence.passed_coverage

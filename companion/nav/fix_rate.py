@@ -27,8 +27,8 @@ import statistics
 from collections import deque
 from dataclasses import dataclass, field
 
-LATENESS_KEPT = 40
-"""Fix arrivals (about 40 s at 1 Hz) whose lateness makes the rhythm."""
+LATENESS_KEPT = 60
+"""Fix arrivals (about a minute at 1 Hz) whose lateness makes the rhythm."""
 MIN_LATENESS_KEPT = 8
 """Arrivals before a rhythm is judged at all."""
 

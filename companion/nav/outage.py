@@ -91,7 +91,7 @@ class OutageConfig:
     recent fixes (:mod:`companion.nav.fix_rate`), at most ``gnss_timeout_max_s``."""
     slow_enter_s: float = ranged(0.5, gt=0.0, finite=False)
     """A receiver whose fixes arrive with a median lateness (the silence before each
-    arrival, over its last 40) above this is slow and irregular (a telemetry link):
+    arrival, over its last 60) above this is slow and irregular (a telemetry link):
     ``GNSS_SLOW``, once, and its own timeout. Half of ``gnss_timeout_s``: a 5 Hz receiver
     that misses epochs is not slow."""
     slow_leave_s: float = ranged(0.35, gt=0.0, finite=False)
