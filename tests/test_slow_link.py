@@ -19,6 +19,7 @@ import pytest
 
 from companion.config import load_config
 from companion.engine import Engine
+from companion.engine.silence import DATA_INTERVALS_KEPT, StreamWatch
 from companion.evaluate.against_input import evaluate_against_input
 from companion.nav.earth import gravity_mps2
 from companion.replay import replay
@@ -143,3 +144,28 @@ def test_the_real_ground_station_recording_is_no_alert_storm(tmp_path):
     assert res.receiver_use.passed
     assert res.gaps_summary.passed_alert
     assert res.confidence.passed_wrong and res.confidence.passed_coverage
+
+
+def test_the_silence_timeout_follows_the_links_longest_pause_bounded():
+    """Twice the longest recent pause that was no silence, between 2 s and 5 s; a fast
+    link keeps 2 s; an old long pause leaves the window."""
+    fast = StreamWatch(2.0, 3.0, 30.0, 2.0, 5.0)
+    for k in range(1000):
+        fast.on_data(k * 0.02)
+    assert fast.timeout_s == 2.0
+    slow = StreamWatch(2.0, 3.0, 30.0, 2.0, 5.0)
+    t = 0.0
+    for dt in (0.5, 1.0, 1.4, 0.9):
+        t += dt
+        assert slow.on_data(t) is None
+    assert slow.timeout_s == pytest.approx(2.8)  # 2 x 1.4 s
+    t += 2.5  # no silence (2.5 < 2.8): it lengthens the timeout, to the bound
+    assert slow.on_data(t) is None
+    assert slow.timeout_s == 5.0
+    for _ in range(DATA_INTERVALS_KEPT):  # the 2.5 s pause leaves the window
+        t += 0.5
+        slow.on_data(t)
+    assert slow.timeout_s == 2.0
+    t += 2.2  # now a silence: ends with its length, and teaches nothing
+    assert slow.on_data(t) == pytest.approx(2.2)
+    assert slow.timeout_s == 2.0

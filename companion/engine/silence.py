@@ -49,7 +49,8 @@ class StreamWatch:
         self.silence_timeout_s = silence_timeout_s
         self.silence_intervals = silence_intervals
         self.silence_timeout_max_s = silence_timeout_max_s
-        self._pauses_s: deque[float] = deque(maxlen=DATA_INTERVALS_KEPT)
+        self._n_pauses = 0
+        self._longest_queue: deque[tuple[int, float]] = deque()
         self._timeout_s = silence_timeout_s
         self._longest_s = 0.0
         self.gnss_timeout_s = 0.0
@@ -106,25 +107,29 @@ class StreamWatch:
 
     def _pause(self, gap_s: float) -> None:
         """A pause between data samples that was no silence: the timeout follows the
-        longest recent one."""
+        longest of the last :data:`DATA_INTERVALS_KEPT` (a sliding maximum: a queue of
+        the pauses not shorter than any after them)."""
         cap = self.silence_timeout_max_s
         if cap <= self.silence_timeout_s:
             return
-        pauses = self._pauses_s
-        dropped = pauses[0] if len(pauses) == pauses.maxlen else -1.0
-        pauses.append(gap_s)
-        if gap_s >= self._longest_s:
-            self._longest_s = gap_s
-        elif dropped >= self._longest_s:
-            self._longest_s = max(pauses)
-        else:
+        n = self._n_pauses
+        self._n_pauses = n + 1
+        queue = self._longest_queue
+        while queue and queue[-1][1] <= gap_s:
+            queue.pop()
+        queue.append((n, gap_s))
+        if queue[0][0] <= n - DATA_INTERVALS_KEPT:
+            queue.popleft()
+        longest = queue[0][1]
+        if longest == self._longest_s:
             return
-        longest = self.silence_intervals * self._longest_s
-        self._timeout_s = max(self.silence_timeout_s, min(cap, longest))
+        self._longest_s = longest
+        self._timeout_s = max(self.silence_timeout_s, min(cap, self.silence_intervals * longest))
 
     def keep_pauses(self, other: StreamWatch) -> None:
         """Take ``other``'s recent pauses and timeout: the link's, not one boot's."""
-        self._pauses_s.extend(other._pauses_s)
+        self._n_pauses = other._n_pauses
+        self._longest_queue = deque(other._longest_queue)
         self._longest_s = other._longest_s
         self._timeout_s = max(self.silence_timeout_s, other._timeout_s)
 
