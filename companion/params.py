@@ -381,6 +381,12 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENG_GAP_ATT", "engine.gap_attitude"),
     ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
     ("DEC_LAG_MEASURE", "decoder.gnss_delay_measure"),
+    ("ENG_SIL_NINT", "engine.silence_intervals"),
+    ("ENG_SIL_MAX", "engine.silence_timeout_max_s"),
+    ("OUT_SLOW_ENTER", "outage.slow_enter_s"),
+    ("OUT_SLOW_LEAVE", "outage.slow_leave_s"),
+    ("OUT_SLOW_MAXINT", "outage.slow_max_interval_s"),
+    ("OUT_GNSS_TMO_MAX", "outage.gnss_timeout_max_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -126,6 +126,8 @@ class AlertCode(enum.Enum):
     GNSS_STALE = "GNSS_STALE"
     BRIDGING = "BRIDGING"
     GNSS_BACK = "GNSS_BACK"
+    GNSS_SLOW = "GNSS_SLOW"
+    GNSS_STEADY = "GNSS_STEADY"
     FAULT = "FAULT"
     INTEGRITY = "INTEGRITY"
     CAT = "CAT"

@@ -483,3 +483,47 @@ def test_bench_realdata_table_skips_and_scores(
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == ["flight", "wrong>25m", "new", "column"]
     assert lines[3].split() == ["other", "-", "1.0", "PASS"]
+
+
+# --------------------------------------------------------------------------- a slow link
+
+
+def slow_link_gaps(tmp_path: Path, announced: bool) -> tuple:
+    """A 1 Hz receiver with a 2.5 s interval at 20 s (its rhythm), then a 3.5 s gap at
+    40 s with no alert of its own and a 7 s gap at 60 s alerted 3.8 s after its last fix;
+    ``announced``: the service's GNSS_SLOW in force from 15 s."""
+    logs = Logs()
+    base(logs, 90.0)
+    times = [t for t in ticks(10.0, 90.0, 1.0) if not 40.0 < t < 43.5 and not 60.0 < t < 67.0]
+    times = [t for t in times if t != 21.0] + [22.5]  # 20 -> 22.5: 2.5 s (then 23.0)
+    times = [t for t in times if t != 22.0]
+    for t in sorted(times):
+        logs.fix(t, 0.0, 0.0, 0.0, 0.0)
+    if announced:
+        logs.alert(15.0, AlertCode.GNSS_SLOW, "fixes every 1.0 s, up to 1.0 s")
+    logs.alert(63.8, AlertCode.GNSS_LOST, "no GNSS messages 3.8 s: bridging")
+    logs.alert(67.0, AlertCode.GNSS_BACK, "after 7.0 s")
+    res = evaluate_against_input(*reversed(logs.write(tmp_path)))
+    return res.gaps, res.gaps_summary
+
+
+def test_a_slow_link_is_judged_from_when_its_fix_was_due(tmp_path: Path) -> None:
+    """With GNSS_SLOW in force the next fix is due by the link's rhythm (its longest
+    interval in the minute before: 2.5 s): the 3.5 s gap ends before an alert is owed
+    (2.5 + 1.5 s), the 7 s one is alerted 1.3 s after its fix was due."""
+    (short, long), summary = slow_link_gaps(tmp_path, announced=True)
+    assert short.rhythm_s == pytest.approx(2.5) and short.within_rhythm
+    assert short.judged_latency_s == 0.0
+    assert long.rhythm_s == pytest.approx(2.5) and not long.within_rhythm
+    assert long.alert_latency_s == pytest.approx(3.8)
+    assert long.judged_latency_s == pytest.approx(1.3)
+    assert summary.passed_alert is True and summary.n_missed == 0
+
+
+def test_without_the_slow_announcement_each_gap_is_judged_from_its_last_fix(
+    tmp_path: Path,
+) -> None:
+    (short, long), summary = slow_link_gaps(tmp_path, announced=False)
+    assert short.rhythm_s is None and short.judged_latency_s is None  # missed
+    assert long.judged_latency_s == pytest.approx(3.8)
+    assert summary.passed_alert is False and summary.n_missed == 1

@@ -100,6 +100,12 @@ class EngineConfig:
     ``NO_DATA``, no position published, and the navigation restarts from the first fix
     after it (``DATA_BACK``). Far above the gaps of a live stream (10-50 Hz), twice those
     of a 1 Hz telemetry recording."""
+    silence_intervals: float = ranged(2.0, ge=1.0)
+    """A link whose data samples come with longer pauses (a ground station's 1 Hz
+    telemetry) is silent only after this many times the longest of its recent pauses
+    that were no silence (:mod:`companion.engine.silence`) ..."""
+    silence_timeout_max_s: float = ranged(5.0, gt=0.0, le=60.0)
+    """... at most this long (s); at or below ``silence_timeout_s`` the timeout is fixed."""
     no_gnss_alert_s: float = ranged(3.0, gt=0.0, le=60.0)
     """No usable fix this long after the autopilot's first sample (or after a silence):
     ``NO_GNSS``, the service is not navigating."""

@@ -57,6 +57,7 @@ from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.baro import BaroConfig, BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
+from companion.nav.fix_rate import FixRhythm
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.gnss import gnss_measurement
 from companion.nav.grades import IMU_GRADES
@@ -193,6 +194,8 @@ class Engine:
         """The IMU's measured noise exceeded its configured grade: the references are off
         for good (:meth:`_widen_grade`)."""
         self._sample_counts: Counter[type] = Counter()
+        self._rhythm = FixRhythm()
+        """The link's rhythm of fixes (slow or not): the link's, kept across restarts."""
         self._publish_rate_hz = self.config.publish_rate_hz
         self.stats = EngineStats()
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
@@ -218,7 +221,17 @@ class Engine:
         self.bridge_evidence = BridgeEvidence(inertial_accel_sigma_mps2(self._blend_config))
         """Probes of the inertial bridge against constant velocity (:mod:`.bridge_choice`)."""
         self._restart_navigation()
-        self.watch = StreamWatch(cfg.silence_timeout_s, cfg.no_gnss_alert_s, cfg.no_gnss_repeat_s)
+        watch = StreamWatch(
+            cfg.silence_timeout_s,
+            cfg.no_gnss_alert_s,
+            cfg.no_gnss_repeat_s,
+            cfg.silence_intervals,
+            cfg.silence_timeout_max_s,
+        )
+        previous: StreamWatch | None = getattr(self, "watch", None)
+        if previous is not None:
+            watch.keep_pauses(previous)  # the link's pauses survive an autopilot reboot
+        self.watch = watch
         """Silence of the autopilot's data and no GNSS at all (:mod:`.silence`)."""
         self._landed: LandedState | None = None
         self.now_s: float | None = None
@@ -264,7 +277,7 @@ class Engine:
             cfg.min_imu_rate_hz,
             cfg.imu_rate_hold_s,
         )
-        self.outage = OutageMonitor(self._outage_config)
+        self.outage = OutageMonitor(self._outage_config, rhythm=self._rhythm)
         """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity.reset()
         self.bridge = PotentialBridge(cfg, self._potential_config)
@@ -368,10 +381,10 @@ class Engine:
         silence, at :meth:`next_due_s`): the outage monitor's and the silence watch's
         alerts that are due. Publishes nothing: without data there is nothing to carry
         the solution with, and after ``silence_timeout_s`` the navigation restarts."""
-        outputs: list[Output] = []
+        # the silence first: when it is due with the GNSS loss, NO_DATA says both
+        outputs: list[Output] = list(self.watch.tick(t_s))
         if self.outage.last_fused_t_s is not None:
             outputs += self._gap_started(self.outage.tick(t_s))
-        outputs += self.watch.tick(t_s)
         if outputs:
             self._account(outputs)
         return outputs
@@ -396,6 +409,11 @@ class Engine:
                     )
                     self.stats.gnss["gap_bridged_cv"] += 1
                     alert = dataclasses.replace(alert, text=alert.text + " on velocity")
+                if self.watch.silent:
+                    # NO_DATA, in force, already says GNSS is gone with every other stream
+                    # (a slow link's GNSS timeout may outlast its silence timeout)
+                    self.stats.gnss["loss_in_silence"] += 1
+                    continue
             out.append(alert)
         return out
 
@@ -645,6 +663,7 @@ class Engine:
             fix, shown_wrong=self.integrity.fde.shown_wrong(rid), now_s=self.now_s
         )
         outputs += verdict.alerts
+        self.watch.gnss_timeout_s = self.outage.timeout_s if self._rhythm.slow else 0.0
         if not verdict.usable:
             self.stats.gnss[verdict.reason] += 1
             return outputs

@@ -64,6 +64,23 @@ class GapResult:
     publication_age_s: float | None
     published_fix_type: int | None
     note: str
+    rhythm_s: float | None = None
+    """With the service's ``GNSS_SLOW`` in force at the last fix: the link's rhythm, the
+    longest interval (under 3 s) between the receiver's 3-D fixes in the minute before
+    it; the next fix was due that long after the last one (None: not slow)."""
+    within_rhythm: bool = False
+    """No alert of its own, and over by the time one was owed (due + the allowed latency):
+    the ``GNSS_SLOW`` announcement in force was its alert."""
+
+    @property
+    def judged_latency_s(self) -> float | None:
+        """The alert latency the rule judges: from the last fix, or from when the next fix
+        was due by the announced slow link's rhythm (0 within it); None: missed."""
+        if self.within_rhythm:
+            return 0.0
+        if self.alert_latency_s is None:
+            return None
+        return max(0.0, self.alert_latency_s - (self.rhythm_s or 0.0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -303,8 +320,8 @@ class AgainstInput:
 
 
 GAP_HEADER = (
-    f"  {'last fix':>9}{'length':>8}{'IMU Hz':>8}{'alert s':>9}{'closure':>9}{'hold':>8}"
-    f"{'cv':>8}{'ratio':>8}{'99%':>8}  in99  note"
+    f"  {'last fix':>9}{'length':>8}{'IMU Hz':>8}{'alert s':>9}{'due s':>7}{'closure':>9}"
+    f"{'hold':>8}{'cv':>8}{'ratio':>8}{'99%':>8}  in99  note"
 )
 
 
@@ -313,9 +330,13 @@ def gap_line(g: GapResult) -> str:
     alert = "missed" if g.alert_latency_s is None else _s(g.alert_latency_s)
     if g.already_in_outage:
         alert = "before"
+    elif g.within_rhythm:
+        alert = "rhythm"
     hz = "-" if g.imu_hz is None else f"{g.imu_hz:.0f}"
+    due = "-" if g.rhythm_s is None else _s(g.rhythm_s)
     return (
-        f"  {g.t_last_fix_s:9.1f}{g.length_s:8.1f}{hz:>8}{alert:>9}{_m(g.closure_h_m):>9}"
+        f"  {g.t_last_fix_s:9.1f}{g.length_s:8.1f}{hz:>8}{alert:>9}{due:>7}"
+        f"{_m(g.closure_h_m):>9}"
         f"{_m(g.hold_h_m):>8}{_m(g.cv_h_m):>8}{_x(g.ratio):>8}{_m(g.bound99_m):>8}"
         f"  {_mark(g.inside99):<4}  {'open' if g.t_first_fix_s is None else ''}{g.note}"
     )

@@ -56,6 +56,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
+from companion.nav.fix_rate import FixRhythm
 from companion.nav.gnss import FALLBACK_H_STD_M, UERE_M, UNKNOWN_H_STD_M
 from companion.nav.receiver_checks import (
     ReceiverCheckConfig,
@@ -85,7 +86,21 @@ class OutageConfig:
     :data:`FIX_INTERVALS_KEPT` between its consecutive fixes, late ones included: kept
     between fused fixes only, the intervals that made it late would never count) plus
     its fixes' usual delivery delay (the median age of a fix when it arrives, against the
-    newest sample time): a fix that is merely not due yet is no outage."""
+    newest sample time): a fix that is merely not due yet is no outage. A slow receiver
+    (``slow_enter_s``) is late only after this many times the longest lateness of its
+    recent fixes (:mod:`companion.nav.fix_rate`), at most ``gnss_timeout_max_s``."""
+    slow_enter_s: float = ranged(0.5, gt=0.0, finite=False)
+    """A receiver whose fixes arrive with a median lateness (the silence before each
+    arrival, over its last 60) above this is slow and irregular (a telemetry link):
+    ``GNSS_SLOW``, once, and its own timeout. Half of ``gnss_timeout_s``: a 5 Hz receiver
+    that misses epochs is not slow."""
+    slow_leave_s: float = ranged(0.35, gt=0.0, finite=False)
+    """... and regular again (``GNSS_STEADY``) only once that median is below this."""
+    slow_max_interval_s: float = ranged(3.0, gt=0.0, finite=False)
+    """A silence this long or longer before a fix is an outage, not the link's rhythm:
+    it does not lengthen the timeout."""
+    gnss_timeout_max_s: float = ranged(4.0, gt=0.0, finite=False)
+    """The longest GNSS timeout a slow receiver's rhythm can make (s)."""
     min_fix_type: int = ranged(int(FixType.FIX_3D), ge=0, le=int(FixType.PPP))
     """Fixes below this type are not usable (2-D fixes carry no height)."""
     max_bridge_s: float = ranged(120.0, gt=0.0, finite=False)
@@ -214,6 +229,8 @@ class OutageMonitor:
     _median_fix_age_s: float = 0.0
     _reset_alerted_t_s: float = -math.inf
     _resets_unalerted: int = 0
+    rhythm: FixRhythm = field(default_factory=FixRhythm)
+    """The link's rhythm of fixes: slow or not (kept by the engine across restarts)."""
 
     # ------------------------------------------------------------------ per fix
 
@@ -242,6 +259,7 @@ class OutageMonitor:
             return FixAssessment(False, "repeated", True, False, tuple(alerts))
         rx.checks.on_fix(fix, self._check_config())
         rx.last_fix = fix
+        alerts += self._rhythm(rx, t, now_s)
         self._fix_interval(rx, t)
         if now_s is not None and math.isfinite(now_s):
             self._fix_ages_s.append(max(0.0, now_s - t))
@@ -383,6 +401,31 @@ class OutageMonitor:
             self._set_mode(self._good_mode())
         return alerts
 
+    def _rhythm(self, rx: _ReceiverState, t_s: float, now_s: float | None) -> list[Alert]:
+        """The fix's lateness into the link's rhythm; ``GNSS_SLOW`` / ``GNSS_STEADY`` when
+        the slow state changes (once per change)."""
+        last = rx.last_t_s
+        if last is None or t_s <= last:
+            return []
+        cfg = self.config
+        arrival = t_s if now_s is None or not math.isfinite(now_s) else max(now_s, t_s)
+        rhythm = self.rhythm
+        changed = rhythm.on_fix(
+            arrival - last, cfg.slow_enter_s, cfg.slow_leave_s, cfg.slow_max_interval_s
+        )
+        if changed is None:
+            return []
+        timeout = self.timeout_s
+        if changed:
+            text = (
+                f"fixes every {rhythm.median_s:.1f} s, up to {rhythm.longest_s:.1f} s: "
+                f"loss alerted past the link's rhythm (now {timeout:.1f} s)"
+            )
+            log.warning("t=%.2f s GNSS slow: %s", t_s, text)
+            return [Alert(t_s, AlertCode.GNSS_SLOW, Severity.WARNING, text)]
+        text = f"fixes every {rhythm.median_s:.1f} s: loss alerted after {timeout:.1f} s"
+        return [Alert(t_s, AlertCode.GNSS_STEADY, Severity.NOTICE, text)]
+
     def _fix_interval(self, rx: _ReceiverState, t_s: float) -> None:
         """Keep the interval since the receiver's previous fix and the timeout it implies."""
         last = rx.last_t_s
@@ -403,10 +446,14 @@ class OutageMonitor:
 
     @property
     def timeout_s(self) -> float:
-        """The GNSS timeout in force: ``gnss_timeout_s``, or longer for a slow receiver
-        (``timeout_fix_intervals`` of its median fix interval plus its fixes' median
-        delivery delay)."""
+        """The GNSS timeout in force: ``gnss_timeout_s``, or longer for a receiver slower
+        than it allows (``timeout_fix_intervals`` of its median fix interval plus its
+        fixes' median delivery delay) and, in the slow state, ``timeout_fix_intervals``
+        of its longest recent lateness, at most ``gnss_timeout_max_s``."""
         cfg = self.config
+        if self.rhythm.slow:
+            longest = cfg.timeout_fix_intervals * self.rhythm.longest_s
+            return max(cfg.gnss_timeout_s, min(cfg.gnss_timeout_max_s, longest))
         slow = cfg.timeout_fix_intervals * self._median_fix_interval_s + self._median_fix_age_s
         return max(cfg.gnss_timeout_s, slow)
 
@@ -471,6 +518,7 @@ class OutageMonitor:
         self._median_fix_interval_s = 0.0
         self._fix_ages_s.clear()
         self._median_fix_age_s = 0.0
+        self.rhythm.clear()
         self._gated_ok = 0
         self._gated_rejects = 0
         self._degraded = False

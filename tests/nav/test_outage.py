@@ -364,22 +364,26 @@ def test_reset_alerts_are_rate_limited_and_counted():
     assert "more since the last alert" in alerts[1].text
 
 
-def test_a_jittery_telemetry_receiver_is_timed_by_all_its_intervals_and_its_delivery_delay():
-    """A ~1 Hz receiver through a telemetry link (intervals 0.6, 0.8, 1.0 s in turn, each
-    fix arriving 0.3 s after its time): its late intervals count (a median of fused
-    intervals alone would keep the 0.8 s and call every 1.2 s a loss), its delivery delay
-    is added, and one gated fix ends its outage."""
+def test_a_jittery_telemetry_receiver_is_slow_once_and_timed_by_its_longest_lateness():
+    """A ~1 Hz receiver through a telemetry link (intervals 0.6, 0.8, 1.0, 1.4 s in turn,
+    each fix arriving 0.3 s after its time): slow, said once (GNSS_SLOW), and late only
+    past 1.5 x its longest recent lateness (1.4 + 0.3 s): no loss per long interval; one
+    gated fix ends its outage."""
     mon = OutageMonitor()
     t = 0.0
+    raised = []
     for k in range(21):  # 20 intervals, five of each
         t += (0.6, 0.8, 1.0, 1.4)[k % 4]
         v = mon.assess(fix(t), now_s=t + 0.3)
         assert v.usable
-        mon.gate_result(t, True)
-    # median interval 0.9 s (late 1.4 s ones included) x 1.5, plus 0.3 s of delivery
-    assert mon.timeout_s == pytest.approx(1.5 * 0.9 + 0.3)
-    assert mon.tick(t + 1.6) == []  # not due yet
-    lost = mon.tick(t + 1.7)
+        raised += v.alerts
+        raised += mon.gate_result(t, True)
+        raised += mon.tick(t + 0.3)
+    assert codes(raised) == [AlertCode.GNSS_SLOW]
+    assert mon.rhythm.slow
+    assert mon.timeout_s == pytest.approx(1.5 * (1.4 + 0.3))
+    assert mon.tick(t + 2.5) == []  # not due yet
+    lost = mon.tick(t + 2.6)
     assert codes(lost) == [AlertCode.GNSS_LOST]
     t += 3.0
     mon.assess(fix(t), now_s=t + 0.3)

@@ -107,10 +107,12 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
     AlertCode.RAW_FAULT: "raw",
     AlertCode.RAW_LOST: "raw",
     AlertCode.RAW_BACK: "raw",
+    AlertCode.GNSS_SLOW: "rate",
+    AlertCode.GNSS_STEADY: "rate",
 }
-"""Alerts that say one state (GNSS, RTK, the data streams, the raw receiver): a change of
-it is always sent, whatever ``statustext_min_interval_s``; only repeats of the state last
-sent are thinned."""
+"""Alerts that say one state (GNSS, RTK, the data streams, the raw receiver, the fix
+rate): a change of it is always sent, whatever ``statustext_min_interval_s``; only
+repeats of the state last sent are thinned."""
 
 
 class Encoder:
