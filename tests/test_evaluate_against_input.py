@@ -367,6 +367,29 @@ def test_statustext_rate_and_parked_flapping(tmp_path: Path) -> None:
     assert x.passed_flapping is False
 
 
+def test_statustext_announcing_real_gaps_not_counted(tmp_path: Path) -> None:
+    """Four real 4 s gaps announced (loss and return: 8 texts) are real changes; four
+    loss/return pairs around 1 s pauses between fixes (no gap) are 8 texts too many."""
+    logs = Logs()
+    base(logs, 70.0)
+    gaps = [(12.0, 16.0), (22.0, 26.0), (32.0, 36.0), (42.0, 46.0)]
+    for t in ticks(10.0, 70.0, 1.0):
+        if not any(a < t < b for a, b in gaps):
+            logs.fix(t, 0.0, 0.0, 0.0, 0.0)
+    for a, b in gaps:
+        logs.alert(a + 1.0, AlertCode.GNSS_LOST, "no GNSS messages 1.0 s: bridging")
+        logs.alert(b + 0.1, AlertCode.GNSS_BACK, "after 4.0 s")
+    x = evaluate_against_input(*reversed(logs.write(tmp_path))).texts
+    assert x.total == 8 and x.real_changes == 8
+    assert x.max_in_window == 0 and x.passed_rate is True
+    for t in (52.5, 54.5, 56.5, 58.5):  # no gap in the input: noise
+        logs.alert(t, AlertCode.GNSS_LOST, "no GNSS messages 1.0 s: bridging")
+        logs.alert(t + 0.4, AlertCode.GNSS_BACK, "after 1.0 s")
+    x = evaluate_against_input(*reversed(logs.write(tmp_path))).texts
+    assert x.total == 16 and x.real_changes == 8
+    assert x.max_in_window == 8 and x.passed_rate is False
+
+
 def test_cli_json_and_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     logs = Logs()
     base(logs, 12.0)

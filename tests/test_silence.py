@@ -304,7 +304,7 @@ def test_an_autopilot_reboot_during_a_silence_ends_it_and_restarts_everything():
     reboot = RebootEvent(t_s=1.0, t_rx_s=41.0, previous_t_s=30.0)
     out = engine.handle(reboot)
     assert [a.text for a in alerts(out, AlertCode.DATA_BACK)] == [
-        "autopilot rebooted: restart from next fix"
+        "reboot: restart from next fix"
     ]
     assert engine.stats.reboots == 1 and not engine.watch.silent
     out = drive(engine, list(line_stream(10.0, line=line, t0_s=1.5)))

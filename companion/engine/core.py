@@ -318,7 +318,7 @@ class Engine:
             if silence_s is not None:
                 resumed = self._after_silence(t_s, silence_s)
         elif kind is RebootEvent and watch.silent:
-            text = "autopilot rebooted: restart from next fix"
+            text = "reboot: restart from next fix"  # one STATUSTEXT
             resumed = [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
         handler = self._handlers.get(kind)
         outputs = handler(sample) if handler is not None else []

@@ -94,8 +94,11 @@ Concurrent fix
     record; required within :data:`NO_GNSS_ALERT_MAX_S`.
 6. STATUSTEXT
     Every whole text the service sent (chunks joined): total, mean per minute of log, and
-    the most in any :data:`TEXT_WINDOW_S` window starting at a text; required <=
-    :data:`TEXT_MAX_PER_WINDOW` (real changes are not excused: stricter than the rule).
+    the most in any :data:`TEXT_WINDOW_S` window starting at a text, real changes left
+    out; required <= :data:`TEXT_MAX_PER_WINDOW`. A real change is a loss or return alert
+    (:data:`REAL_CHANGE_CODES`) sent while the input itself shows a gap of at least
+    :data:`GAP_MIN_S` between 3-D fixes or a dropout of every stream of at least
+    :data:`DROPOUT_MIN_S` (from its start to :data:`GAP_ALERT_MAX_S` after its end).
     Parked: consecutive 3-D fixes (at most :func:`max_bracket_s` apart) slower than
     :data:`PARKED_SPEED_MPS` (ground speed) for at least :data:`PARKED_MIN_S`. A flap is
     an alert inside a parked interval whose key (code and text with every number removed)
@@ -178,6 +181,10 @@ DROPOUT_MIN_S = 3.0
 NO_GNSS_ALERT_MAX_S = 5.0
 TEXT_WINDOW_S = 60.0
 TEXT_MAX_PER_WINDOW = 6
+REAL_CHANGE_CODES: frozenset[str] = frozenset(
+    {"GNSS_LOST", "BRIDGING", "GNSS_BACK", "NO_DATA", "DATA_BACK"}
+)
+"""Alerts that announce a loss or a return: a real change when the input shows one."""
 PARKED_SPEED_MPS = 0.5
 PARKED_MIN_S = 10.0
 LOSS_ALERT_CODES: frozenset[str] = frozenset({"GNSS_LOST", "BRIDGING", "NO_GNSS", "NO_DATA"})
@@ -953,8 +960,27 @@ def _alert_key(code: str, rest: str) -> str:
     return " ".join(f"{code} {_NUMBER_RE.sub('', rest)}".split())
 
 
+def _real_change_spans(inp: _Input) -> list[tuple[float, float]]:
+    """Record-clock spans of what the input itself shows changed: each gap of at least
+    :data:`GAP_MIN_S` between 3-D fixes and each dropout of every stream of at least
+    :data:`DROPOUT_MIN_S`, from its start to :data:`GAP_ALERT_MAX_S` after its end."""
+    spans: list[tuple[float, float]] = []
+    fix_rx = np.sort(inp.fixes.take(inp.fixes.ok3d).t_rx)
+    for t, min_s in ((fix_rx, GAP_MIN_S), (inp.data_t_rx, DROPOUT_MIN_S)):
+        for i in np.nonzero(np.diff(t) >= min_s)[0]:
+            spans.append((float(t[i]), float(t[i + 1]) + GAP_ALERT_MAX_S))
+    return spans
+
+
 def _texts(inp: _Input, out: _Output) -> TextResult:
-    t = np.asarray([x[0] for x in out.texts], dtype=np.float64)
+    spans = _real_change_spans(inp)
+
+    def real(t_rx: float, text: str) -> bool:
+        code = text.split(" ", 2)[1] if text.startswith("CMP ") and " " in text[4:] else ""
+        return code in REAL_CHANGE_CODES and any(a <= t_rx <= b for a, b in spans)
+
+    n_real = sum(real(x[0], x[1]) for x in out.texts)
+    t = np.asarray([x[0] for x in out.texts if not real(x[0], x[1])], dtype=np.float64)
     duration = max(inp.last_t_rx - inp.first_t_rx, 1e-9)
     if t.size:
         ends = np.searchsorted(t, t + TEXT_WINDOW_S, side="left")
@@ -994,8 +1020,9 @@ def _texts(inp: _Input, out: _Output) -> TextResult:
                 seen.add(key)
     n_flap = sum(v for k, v in flaps.items() if k.split(" ", 1)[0] in FLAP_CODES)
     return TextResult(
-        total=int(t.size),
-        per_minute=float(t.size / (duration / 60.0)),
+        total=len(out.texts),
+        per_minute=float(len(out.texts) / (duration / 60.0)),
+        real_changes=n_real,
         max_in_window=max_window,
         max_window_start_s=at,
         passed_rate=max_window <= TEXT_MAX_PER_WINDOW,

@@ -131,6 +131,8 @@ class TextResult:
 
     total: int
     per_minute: float
+    real_changes: int
+    """Texts announcing a gap or dropout the input shows: not counted in the window."""
     max_in_window: int
     max_window_start_s: float | None
     passed_rate: bool
@@ -295,8 +297,8 @@ class AgainstInput:
                 f"message (any alert {_s(n.first_any_alert_s)} s; first fix "
                 f"{_s(n.first_fix_after_s)} s)  {_mark(n.passed)}"
             ),
-            f"STATUSTEXT: {t.total} ({t.per_minute:.1f}/min), at most {t.max_in_window} in 60 s"
-            f" (<= 6)  {_mark(t.passed_rate)}",
+            f"STATUSTEXT: {t.total} ({t.per_minute:.1f}/min, {t.real_changes} announcing real "
+            f"gaps), at most {t.max_in_window} others in 60 s (<= 6)  {_mark(t.passed_rate)}",
             f"parked {t.parked_s:.0f} s in {t.n_parked_intervals} interval(s): "
             f"{t.flaps_phase_integrity} phase/integrity flaps, {t.flaps_all} repeats in all  "
             f"{_mark(t.passed_flapping)}",

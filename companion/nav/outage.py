@@ -417,13 +417,11 @@ class OutageMonitor:
             return []
         timeout = self.timeout_s
         if changed:
-            text = (
-                f"fixes every {rhythm.median_s:.1f} s, up to {rhythm.longest_s:.1f} s: "
-                f"loss alerted past the link's rhythm (now {timeout:.1f} s)"
-            )
-            log.warning("t=%.2f s GNSS slow: %s", t_s, text)
+            # one STATUSTEXT (50 characters with "CMP GNSS_SLOW "); the longest in the log
+            text = f"fix every {rhythm.median_s:.1f} s: loss after {timeout:.1f} s"
+            log.warning("t=%.2f s GNSS slow: %s (longest %.1f s)", t_s, text, rhythm.longest_s)
             return [Alert(t_s, AlertCode.GNSS_SLOW, Severity.WARNING, text)]
-        text = f"fixes every {rhythm.median_s:.1f} s: loss alerted after {timeout:.1f} s"
+        text = f"fix every {rhythm.median_s:.1f} s: loss after {timeout:.1f} s"
         return [Alert(t_s, AlertCode.GNSS_STEADY, Severity.NOTICE, text)]
 
     def _fix_interval(self, rx: _ReceiverState, t_s: float) -> None:
