@@ -257,6 +257,7 @@ class Engine:
         (its counters kept), bridge, publisher, local frame and inertial references. The
         heading correction, the landed state and the clocks are the caller's."""
         cfg = self.config
+        old = getattr(self, "navigators", None)
         self.navigators = Navigators(
             cfg.navigator,
             self._blend_config,
@@ -264,6 +265,10 @@ class Engine:
             cfg.min_imu_rate_hz,
             cfg.imu_rate_hold_s,
         )
+        if old is not None and isinstance(old.primary, BlendNavigator):
+            new = self.navigators.primary
+            if isinstance(new, BlendNavigator):
+                new.adopt_imu_noise(old.primary)  # the IMU's noise, measured, is kept
         self.outage = OutageMonitor(self._outage_config)
         """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity.reset()
