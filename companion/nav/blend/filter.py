@@ -765,6 +765,7 @@ class BlendNavigator:
             (r_pos[0], r_pos[1]),
             (r_vel[0], r_vel[1]),
             tau,
+            meas.fix_type,
         )
         r_vel[0] += ex_n
         r_vel[1] += ex_e

@@ -63,11 +63,13 @@ class VelocityErrorMeter:
         self.white_fraction = white_fraction
         self._bounds = {k: float(chi2.isf(FALSE_ALARM_PROB, k)) / k for k in range(1, KEPT + 1)}
         self._samples: deque[tuple[float, float, float, float, float]] = deque(maxlen=KEPT)
-        """Per baseline: squared error N, E (m^2/s^2), their expectations, its mean fix
-        interval (s)."""
+        """Per baseline: the mean velocity error N, E (m/s), their expected variances
+        (m^2/s^2), its mean fix interval (s)."""
         self.receiver_id: int | None = None
         self.excess_var_ne_m2ps2 = (0.0, 0.0)
         """The velocity variance beyond the reported one, north and east, m^2/s^2."""
+        self._regime: object = None
+        self._last_pos_var = (0.0, 0.0)
         self.restart_chain()
 
     def restart_chain(self) -> None:
@@ -89,10 +91,13 @@ class VelocityErrorMeter:
         pos_var_ne_m2: tuple[float, float],
         vel_var_ne_m2ps2: tuple[float, float],
         tau_s: float,
+        regime: object = None,
     ) -> tuple[float, float]:
         """Take one fix of ``receiver_id`` (local frame, its reported variances, the
         position error's correlation time ``tau_s``); returns the excess velocity
-        variance to add, north and east (m^2/s^2)."""
+        variance to add, north and east (m^2/s^2). A change of ``regime`` (the fix type)
+        or a jump of the reported position variance beyond 4x starts a new error regime
+        (:mod:`.receiver`): the positions before it say nothing about the velocity."""
         if receiver_id != self.receiver_id:
             self.receiver_id = receiver_id
             self._samples.clear()
@@ -103,7 +108,17 @@ class VelocityErrorMeter:
             self.restart_chain()
             return self.excess_var_ne_m2ps2
         prev, prev_vel = self._prev, self._prev_vel
-        if prev is None or prev_vel is None or not 0.0 < t_s - prev[0] <= MAX_INTERVAL_S:
+        last_var = self._last_pos_var
+        new_regime = regime != self._regime or any(
+            v > 4.0 * o or v < 0.25 * o for v, o in zip(pos_var_ne_m2, last_var, strict=True)
+        )
+        self._regime, self._last_pos_var = regime, pos_var_ne_m2
+        if (
+            new_regime
+            or prev is None
+            or prev_vel is None
+            or not 0.0 < t_s - prev[0] <= MAX_INTERVAL_S
+        ):
             self.restart_chain()
             self._start = (t_s, pos_ne_m[0], pos_ne_m[1])
             self._start_pos_var = pos_var_ne_m2
@@ -127,7 +142,7 @@ class VelocityErrorMeter:
             r = 0.5 * (self._start_pos_var[i] + pos_var_ne_m2[i])
             pos_term = (2.0 * f * r + 2.0 * (1.0 - f) * r * corr) / (span * span)
             vel_term = self._vel_var_sum[i] / (self._n * self._n)
-            sample += [err * err, pos_term + vel_term]
+            sample += [err, pos_term + vel_term]
         self._samples.append((sample[0], sample[2], sample[1], sample[3], span / self._n))
         self._start, self._start_pos_var = self._prev, pos_var_ne_m2
         self._integral = [0.0, 0.0]
@@ -142,15 +157,23 @@ class VelocityErrorMeter:
         if k < MIN_BASELINES:
             return (0.0, 0.0)
         bound = self._bounds[k]
-        # an error that lasts the window is correlated over it: fused at every fix as
-        # white noise, its white equivalent is its variance times 2 T / dt (the same
-        # low-frequency PSD, 2 sigma^2 T)
         span = sum(s[4] for s in samples) / k
-        corr = 2.0 * KEPT * BASELINE_S / span if span > 0.0 else 1.0
+        # the persistent error (a bias lasting the window) is correlated over it: fused at
+        # every fix as white noise, its white equivalent is its variance times 2 T / dt
+        # (the same low-frequency PSD, 2 sigma^2 T). What varies from baseline to
+        # baseline is not counted: the trapezoid rule also errs by the motion between
+        # fixes (a walker's gait sampled at 4 Hz), which is no error of the receiver's
+        corr = 2.0 * k * BASELINE_S / span if span > 0.0 else 1.0
         out = []
         for i in range(2):
-            sq = sum(s[i] for s in samples) / k
+            errs = [s[i] for s in samples]
             expected = sum(s[2 + i] for s in samples) / k
-            ratio = sum(s[i] / s[2 + i] for s in samples if s[2 + i] > 0.0) / k
-            out.append(max(0.0, sq - expected) * corr if ratio > bound else 0.0)
+            ratio = sum(e * e / s[2 + i] for e, s in zip(errs, samples, strict=True)) / k
+            if ratio <= bound:
+                out.append(0.0)
+                continue
+            mean = sum(errs) / k
+            var_about = sum((e - mean) ** 2 for e in errs) / (k - 1)
+            persistent = max(0.0, mean * mean - var_about / k)
+            out.append(persistent * corr)
         return (out[0], out[1])
