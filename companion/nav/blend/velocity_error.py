@@ -167,7 +167,6 @@ class VelocityErrorMeter:
         out = []
         for i in range(2):
             errs = [s[i] for s in samples]
-            expected = sum(s[2 + i] for s in samples) / k
             ratio = sum(e * e / s[2 + i] for e, s in zip(errs, samples, strict=True)) / k
             if ratio <= bound:
                 out.append(0.0)
