@@ -46,6 +46,9 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+import numpy as np
+from scipy.stats import chi2
+
 from companion.engine.bridge import PotentialBridge
 from companion.engine.bridge_choice import BridgeEvidence, inertial_accel_sigma_mps2
 from companion.engine.config import EngineConfig
@@ -99,6 +102,11 @@ without one (s): ArduPilot asks for GPS at 5 Hz at least (AP_GPS's GPS_MAX_DELTA
 200 ms and a 45 ms margin)."""
 LATE_FIX_INTERVALS = 0.5
 """... and how late (in fix intervals) an expected fix is waited for before it."""
+RESET_ALERT_CHI2 = float(chi2.isf(1e-3, 2))
+"""A reset of the navigator to a receiver is alerted only when the fix is beyond this
+squared Mahalanobis distance (2 dof, false-alarm probability 1e-3: 13.8) from the
+solution, their covariances combined: within it the solution had said it could be that
+far off (:meth:`Engine._within_bound`)."""
 _DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
 """Samples whose absence for ``silence_timeout_s`` is a silence (:mod:`.silence`)."""
 
@@ -645,7 +653,10 @@ class Engine:
         rid = fix.receiver_id
         # another receiver's separation (or a reference) showed it wrong: no reset to it
         verdict = self.outage.assess(
-            fix, shown_wrong=self.integrity.fde.shown_wrong(rid), now_s=self.now_s
+            fix,
+            shown_wrong=self.integrity.fde.shown_wrong(rid),
+            now_s=self.now_s,
+            within_bound=self._within_bound,
         )
         outputs += verdict.alerts
         if not verdict.usable:
@@ -749,6 +760,31 @@ class Engine:
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    def _within_bound(self, fix: GnssFix) -> bool:
+        """Does the solution hold ``fix`` within its bound: the horizontal offset of the
+        fix (carried to the navigator's time by its own velocity) from the navigator's
+        position, against their combined covariance, inside the chi-square 2-dof
+        ``1 - RESET_ALERT_FALSE_PROB`` quantile? A reset to such a fix moves the solution
+        by no more than it said it could be off (outage monitor: not a fault)."""
+        frame, now = self.frame, self.now_s
+        if frame is None or now is None:
+            return False
+        state = self.navigators.navigator.predict(now)
+        if state is None:
+            return False
+        meas = gnss_measurement(fix, frame)
+        vel = meas.vel_ned_mps[:2]
+        carried = meas.pos_ned_m[:2] + (vel if np.all(np.isfinite(vel)) else 0.0) * (now - fix.t_s)
+        d = state.pos_ned_m[:2] - carried
+        cov = state.pos_cov_ned_m2[:2, :2] + np.diag(meas.pos_var_ned_m2[:2])
+        if not np.all(np.isfinite(d)) or not np.all(np.isfinite(cov)):
+            return False
+        try:
+            d2 = float(d @ np.linalg.solve(cov, d))
+        except np.linalg.LinAlgError:
+            return False
+        return d2 <= RESET_ALERT_CHI2
 
     def _raw_reference(self, t_s: float) -> AnchoredState | None:
         """The raw receiver's carrier-phase solution as a reference for the separation tests
