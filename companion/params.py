@@ -380,6 +380,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_RATE_DRIFT", "blend.rate_drift_window_s"),
     ("ENG_GAP_ATT", "engine.gap_attitude"),
     ("ENG_GAP_FEED_ACC", "engine.gap_feed_max_h_acc_m"),
+    ("BLD_ACC_MEASURED", "blend.accel_noise_measured"),
+    ("BLD_VEL_ERR_MEAS", "blend.vel_error_measured"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -17,10 +17,17 @@ variance ``r``, the rest Gauss-Markov of correlation time ``tau``):
 ``2 f r + 2 (1 - f) r (1 - exp(-T / tau))``, over ``T^2``; the reported velocity noise
 adds its variance over the fixes averaged. Per horizontal axis, over the last
 :data:`KEPT` baselines, the mean of the squared error over that expectation is
-``chi2(K) / K`` for a receiver whose velocity is as good as it says; beyond the
-``1 - FALSE_ALARM_PROB`` quantile, the excess (mean square less expectation) is added
-to the reported velocity variance. RTK positions (1-2 cm) see a 0.05 m/s bias at once;
-a 3D fix's metre-level position noise sees nothing and the reported accuracy stands.
+``chi2(K) / K`` for a receiver whose velocity is as good as it says. Beyond the
+``1 - FALSE_ALARM_PROB`` quantile, the persistent part of the error (the squared mean
+less its own spread over ``K``) is added to the reported velocity variance as the white
+equivalent of an error correlated over the window: times ``2 T / dt`` (``T`` the
+window, ``dt`` the fix interval: the same low-frequency PSD, ``2 sigma^2 T``). What
+varies from baseline to baseline is not counted: the trapezoid rule also errs by the
+motion between fixes (a walker's gait sampled at 4 Hz), which is no error of the
+receiver's. RTK positions (1-2 cm) see a 0.05 m/s bias within seconds; a 3D fix's
+metre-level position noise sees nothing and the reported accuracy stands. A change of
+fix type or a jump of the reported position variance (a new error regime of the
+position, :mod:`.receiver`) starts a new chain.
 
 The vertical is left as reported (GPS_RAW_INT has no vertical velocity). Pure: no I/O,
 no clock.
@@ -28,9 +35,10 @@ no clock.
 References
 ----------
 Groves, Principles of GNSS, inertial and multisensor navigation, 2nd ed., sec. 17.3.1
-(measurement consistency), sec. 9.2.7 (Doppler-derived velocity errors); Bar-Shalom, Li
-and Kirubarajan, Estimation with applications to tracking and navigation, sec. 5.4.2
-(the time-average chi-square test).
+(measurement consistency); Bar-Shalom, Li and Kirubarajan, Estimation with applications
+to tracking and navigation, sec. 5.4.2 (the time-average chi-square test); Bryson and
+Henrikson, "Estimation using sampled data containing sequentially correlated noise",
+J. Spacecraft and Rockets 5(6), 1968 (time-correlated measurement errors).
 """
 
 from __future__ import annotations
