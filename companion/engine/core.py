@@ -159,6 +159,19 @@ class EngineStats:
     """Silences ended by data (each restarted the navigation)."""
 
 
+def _position_within_bound(update: GnssUpdate) -> bool:
+    """Is the horizontal position innovation of ``update`` inside :data:`RESET_ALERT_CHI2`
+    of its covariance?"""
+    y = update.innovation[:2]
+    cov = update.innovation_cov[:2, :2]
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(cov))):
+        return False
+    try:
+        return float(y @ np.linalg.solve(cov, y)) <= RESET_ALERT_CHI2
+    except np.linalg.LinAlgError:
+        return False
+
+
 class Engine:
     """Samples in, outputs out. See the module docstring."""
 
@@ -285,6 +298,9 @@ class Engine:
         self.coast: InertialCoast | None = None
         """The free-inertial references (with the blend, once the frame exists)."""
         self._rx_last_usable_t_s: dict[int, float] = {}
+        self._rejected_beyond_bound: set[int] = set()
+        """Receivers of which a fix, since the last one used, was rejected with its
+        horizontal position beyond the prediction's bound (:meth:`_within_bound`)."""
         self.frame: LocalFrame | None = None
         self._next_outage_tick_s = -math.inf
         self._fix_fused = False
@@ -725,6 +741,8 @@ class Engine:
         if not update.fused and update.reason == "gate":
             self.stats.gnss["gate_rejected"] += 1
             self.outage.rejected(fix)
+            if not _position_within_bound(update):
+                self._rejected_beyond_bound.add(rid)
             # the receiver's own evidence vouches for the fix: the gate measured the
             # prediction's error; fused anyway (repeated, the outage monitor resets)
             if self.outage.vouched(fix) and not self.integrity.fde.shown_wrong(rid):
@@ -737,6 +755,7 @@ class Engine:
             self.stats.gnss["fused_vouched" if vouched else "fused"] += 1
             if not vouched:
                 self.outage.used(fix)
+                self._rejected_beyond_bound.discard(rid)
             self.publisher.last_fused_fix = fix
             self.publisher.satellites = fix.satellites or 0
             self.bridge.add_fix(meas)
@@ -762,11 +781,14 @@ class Engine:
         return outputs
 
     def _within_bound(self, fix: GnssFix) -> bool:
-        """Does the solution hold ``fix`` within its bound: the horizontal offset of the
-        fix (carried to the navigator's time by its own velocity) from the navigator's
-        position, against their combined covariance, inside the chi-square 2-dof
-        ``1 - RESET_ALERT_FALSE_PROB`` quantile? A reset to such a fix moves the solution
-        by no more than it said it could be off (outage monitor: not a fault)."""
+        """Has the solution held the receiver of ``fix`` within its bound: every fix of it
+        rejected since its last one used had its horizontal position innovation inside
+        :data:`RESET_ALERT_CHI2` (the gate may have failed on the velocity), and ``fix``
+        itself (carried to the navigator's time by its own velocity) is inside it from the
+        navigator's position, their covariances combined? A reset to it then moves the
+        solution by no more than it said it could be off (outage monitor: not a fault)."""
+        if fix.receiver_id in self._rejected_beyond_bound:
+            return False
         frame, now = self.frame, self.now_s
         if frame is None or now is None:
             return False
@@ -811,6 +833,7 @@ class Engine:
         self.bridge.restart()
         self.bridge.add_fix(meas)
         self.outage.used(fix)
+        self._rejected_beyond_bound.discard(fix.receiver_id)
         self.stats.gnss["reinitialised"] += 1
         self.publisher.last_fused_fix = fix
         self._fix_fused = True

@@ -4,9 +4,10 @@ is driven by.
 A datasheet's accelerometer density is the sensor's noise at rest. On a multirotor the
 IMU stream also carries the rotors' vibration: the autopilot's low-pass filter leaves
 part of it, and sampling the filtered signal at the stream's rate (50 Hz for RAW_IMU)
-aliases the rest into the band the INS integrates. Recorded ArduPilot flights measure
-9 to 190 times the density of a MEMS IMU in 1-sigma; integrated between 5 Hz fixes that
-is 0.1 m/s of velocity error where the datasheet says 1 mm/s, and a filter that believes
+aliases the rest into the band the INS integrates. Recorded ArduPilot copters measure
+a few to hundreds of times the density of a MEMS IMU in 1-sigma; at 100 times,
+integrated between 5 Hz fixes, that is 0.07 m/s of velocity error where the datasheet
+says 1 mm/s, and a filter that believes
 the datasheet rejects every fix that disagrees with its prediction.
 
 So the white noise is measured from the stream itself: the second differences of the
@@ -14,10 +15,11 @@ readings (:mod:`companion.nav.imu_check`) over short windows of ``window`` sampl
 the variance per sample, and the PSD that summing the samples integrates into velocity
 is that variance over the sample rate. A window above the configured density beyond
 chance (the check's threshold) counts at its measured PSD, otherwise at the configured
-one; the PSD in use is the largest of the windows of the last ``hold_s`` seconds:
-vibration that starts (a take-off) is followed within one window, vibration that stops
-is let go only after ``hold_s`` (a short quiet window does not make the filter
-overconfident). It is the IMU's, not one run of the filter's: it is kept across
+one; the PSD in use is the mean of the windows of the last ``hold_s`` seconds, or the
+latest window's when that is larger: vibration that starts (a take-off) is followed
+within one window, vibration that stops is let go over ``hold_s`` (a short quiet window
+does not make the filter overconfident), and steady vibration is measured over many
+windows (the largest of them would be biased high by a third). It is the IMU's, not one run of the filter's: it is kept across
 restarts.
 
 ArduPilot's EKF3 and PX4's EKF2 ship an accelerometer process noise of 0.35 m/s^2
@@ -35,11 +37,14 @@ from collections import deque
 from companion.nav.imu_check import ImuNoiseCheck
 from companion.types import ImuSample
 
-WINDOW_SAMPLES = 100
-"""Samples per window (2 s at 50 Hz): 154 degrees of freedom, an 11 % spread of the
-measured variance (:mod:`companion.nav.imu_check`)."""
+WINDOW_SAMPLES = 50
+"""Samples per window (1 s at 50 Hz): 77 degrees of freedom, a 16 % spread of the
+measured variance (:mod:`companion.nav.imu_check`). On the simulated copter, 2 s windows
+followed the take-off's vibration too late: the prediction left its bound and the
+navigator was reset to the receiver, alerted."""
 HOLD_S = 10.0
-"""The PSD in use is the largest of the windows that closed within this many seconds."""
+"""The PSD in use is the mean of the windows that closed within this many seconds (or
+the latest window's, when larger)."""
 
 
 class AccelNoise:
@@ -79,7 +84,7 @@ class AccelNoise:
         windows.append((verdict.t_s, psd))
         while windows and windows[0][0] < verdict.t_s - self.hold_s:
             windows.popleft()
-        new = max(p for _, p in windows)
+        new = max(psd, sum(p for _, p in windows) / len(windows))
         if new == self.psd_m2ps3:
             return False
         self.psd_m2ps3 = new
