@@ -19,8 +19,8 @@ one; the PSD in use is the mean of the windows of the last ``hold_s`` seconds, o
 latest window's when that is larger: vibration that starts (a take-off) is followed
 within one window, vibration that stops is let go over ``hold_s`` (a short quiet window
 does not make the filter overconfident), and steady vibration is measured over many
-windows (the largest of them would be biased high by a third). It is the IMU's, not one run of the filter's: it is kept across
-restarts.
+windows (the largest of them would be biased high by a third). It is the IMU's, not one
+run of the filter's: it is kept across restarts.
 
 ArduPilot's EKF3 and PX4's EKF2 ship an accelerometer process noise of 0.35 m/s^2
 (``EK3_ACC_P_NSE``, ``EKF2_ACC_NOISE``) for the same reason, two orders above a MEMS
