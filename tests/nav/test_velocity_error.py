@@ -79,3 +79,14 @@ def test_the_motion_between_fixes_is_not_a_receiver_error() -> None:
     ex_n, ex_e = _run(4, vel_wobble_mps=0.3, duration_s=60.0)
     assert ex_n == 0.0
     assert ex_e < 0.02**2, ex_e
+
+
+def test_the_same_fix_offered_twice_keeps_the_chain() -> None:
+    # a fix the gate rejected is offered again without the gate (vouched for by the
+    # receiver's own evidence): it must not restart the baseline
+    meter = VelocityErrorMeter(0.1)
+    for k in range(60):
+        t = k * 0.2
+        for _ in range(2):
+            meter.on_fix(0, t, (0.0, 5.0 * t), (0.08, 5.0), (2e-4, 2e-4), (4e-4, 4e-4), 30.0)
+    assert meter.excess_var_ne_m2ps2[0] > 50.0 * 0.08**2
