@@ -62,6 +62,7 @@ class AccelNoise:
         self.configured_psd_m2ps3 = acc_density_mps2_rthz**2
         self.hold_s = hold_s
         self._windows: deque[tuple[float, float]] = deque()
+        """Per window: its end (s) and its PSD beyond the configured one (m^2/s^3)."""
         self.psd_m2ps3 = self.configured_psd_m2ps3
         """The PSD in use, m^2/s^3."""
 
@@ -75,16 +76,17 @@ class AccelNoise:
         verdict = self._check.on_imu(sample)
         if verdict is None:
             return False
-        psd = self.configured_psd_m2ps3
+        configured = self.configured_psd_m2ps3
+        excess = 0.0  # the window's PSD beyond the configured one
         if verdict.acc_ratio > verdict.threshold and math.isfinite(verdict.acc_psd_m2ps3):
-            psd = max(psd, verdict.acc_psd_m2ps3)
+            excess = max(0.0, verdict.acc_psd_m2ps3 - configured)
         windows = self._windows
         if windows and verdict.t_s < windows[-1][0]:
             windows.clear()  # a new clock (an autopilot reboot)
-        windows.append((verdict.t_s, psd))
+        windows.append((verdict.t_s, excess))
         while windows and windows[0][0] < verdict.t_s - self.hold_s:
             windows.popleft()
-        new = max(psd, sum(p for _, p in windows) / len(windows))
+        new = configured + max(excess, sum(p for _, p in windows) / len(windows))
         if new == self.psd_m2ps3:
             return False
         self.psd_m2ps3 = new
