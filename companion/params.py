@@ -387,6 +387,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("OUT_SLOW_LEAVE", "outage.slow_leave_s"),
     ("OUT_SLOW_MAXINT", "outage.slow_max_interval_s"),
     ("OUT_GNSS_TMO_MAX", "outage.gnss_timeout_max_s"),
+    ("BLD_ACC_MEASURED", "blend.accel_noise_measured"),
+    ("BLD_VEL_ERR_MEAS", "blend.vel_error_measured"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

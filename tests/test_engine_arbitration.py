@@ -155,3 +155,34 @@ def test_a_height_fault_is_not_vouched_for_by_horizontal_evidence():
         if isinstance(s, NavSolution) and 25.0 <= s.t_s < 25.0 + bound_s - 0.2:
             pos = ORIGIN.lla_to_ned(s.lat_rad, s.lon_rad, s.alt_msl_m)
             assert abs(pos[2] - LINE.pos_ned_m(s.t_s, 10.0)[2]) < 2.0, s.t_s
+
+
+def _vibrating(stream, sigma_mps2, seed):
+    """The IMU's specific force with white vibration of ``sigma_mps2`` per sample."""
+    rng = np.random.default_rng(seed)
+    for s in stream:
+        if isinstance(s, ImuSample):
+            s = replace(s, acc_b_mps2=s.acc_b_mps2 + rng.normal(0.0, sigma_mps2, 3))
+        yield s
+
+
+def test_a_reset_within_the_solutions_bound_is_not_alerted():
+    """A vibrating IMU (its noise measured) and a 0.4 s transient of 2 m/s^2 (a take-off's
+    spool-up): the velocity fails the gate, the navigator is reset to the receiver, but
+    its position never left the bound it published: no FAULT (an alert must be true)."""
+    engine = Engine(EngineConfig(navigator="blend"))
+    stream = line_stream(40.0, line=LINE, gnss_hz=5.0, noise_m=0.01, seed=2)
+    outs = run(_imu_error(_vibrating(stream, 0.7, 3), 25.0, 25.4, 2.0), engine)
+    assert engine.stats.gnss["reinitialised"] == 1, dict(engine.stats.gnss)
+    assert engine.outage.resets_within_bound == 1
+    assert AlertCode.FAULT not in codes(outs)
+
+
+def test_a_reset_beyond_the_solutions_bound_is_alerted():
+    """The same IMU 3 m/s^2 off for 3 s: the prediction leaves its own bound, and the
+    reset to the receiver says so."""
+    engine = Engine(EngineConfig(navigator="blend"))
+    stream = line_stream(40.0, line=LINE, gnss_hz=5.0, noise_m=0.01, seed=2)
+    outs = run(_imu_error(_vibrating(stream, 0.7, 3), 25.0, 28.0, 3.0), engine)
+    assert engine.outage.resets > engine.outage.resets_within_bound
+    assert AlertCode.FAULT in codes(outs)

@@ -46,6 +46,9 @@ from collections import Counter
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
+import numpy as np
+from scipy.stats import chi2
+
 from companion.engine.bridge import PotentialBridge
 from companion.engine.bridge_choice import BridgeEvidence, inertial_accel_sigma_mps2
 from companion.engine.config import EngineConfig
@@ -100,6 +103,11 @@ without one (s): ArduPilot asks for GPS at 5 Hz at least (AP_GPS's GPS_MAX_DELTA
 200 ms and a 45 ms margin)."""
 LATE_FIX_INTERVALS = 0.5
 """... and how late (in fix intervals) an expected fix is waited for before it."""
+RESET_ALERT_CHI2 = float(chi2.isf(1e-3, 2))
+"""A reset of the navigator to a receiver is alerted only when the fix is beyond this
+squared Mahalanobis distance (2 dof, false-alarm probability 1e-3: 13.8) from the
+solution, their covariances combined: within it the solution had said it could be that
+far off (:meth:`Engine._within_bound`)."""
 _DATA_KINDS = frozenset({ImuSample, AttitudeSample, GnssFix})
 """Samples whose absence for ``silence_timeout_s`` is a silence (:mod:`.silence`)."""
 
@@ -150,6 +158,19 @@ class EngineStats:
     reanchors: int = 0
     silences: int = 0
     """Silences ended by data (each restarted the navigation)."""
+
+
+def _position_within_bound(update: GnssUpdate) -> bool:
+    """Is the horizontal position innovation of ``update`` inside :data:`RESET_ALERT_CHI2`
+    of its covariance?"""
+    y = update.innovation[:2]
+    cov = update.innovation_cov[:2, :2]
+    if not (np.all(np.isfinite(y)) and np.all(np.isfinite(cov))):
+        return False
+    try:
+        return float(y @ np.linalg.solve(cov, y)) <= RESET_ALERT_CHI2
+    except np.linalg.LinAlgError:
+        return False
 
 
 class Engine:
@@ -270,6 +291,7 @@ class Engine:
         (its counters kept), bridge, publisher, local frame and inertial references. The
         heading correction, the landed state and the clocks are the caller's."""
         cfg = self.config
+        old = getattr(self, "navigators", None)
         self.navigators = Navigators(
             cfg.navigator,
             self._blend_config,
@@ -277,6 +299,10 @@ class Engine:
             cfg.min_imu_rate_hz,
             cfg.imu_rate_hold_s,
         )
+        if old is not None and isinstance(old.primary, BlendNavigator):
+            new = self.navigators.primary
+            if isinstance(new, BlendNavigator):
+                new.adopt_imu_noise(old.primary)  # the IMU's noise, measured, is kept
         self.outage = OutageMonitor(self._outage_config, rhythm=self._rhythm)
         """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity.reset()
@@ -285,6 +311,9 @@ class Engine:
         self.coast: InertialCoast | None = None
         """The free-inertial references (with the blend, once the frame exists)."""
         self._rx_last_usable_t_s: dict[int, float] = {}
+        self._rejected_beyond_bound: set[int] = set()
+        """Receivers of which a fix, since the last one used, was rejected with its
+        horizontal position beyond the prediction's bound (:meth:`_within_bound`)."""
         self.frame: LocalFrame | None = None
         self._next_outage_tick_s = -math.inf
         self._fix_fused = False
@@ -660,7 +689,10 @@ class Engine:
         rid = fix.receiver_id
         # another receiver's separation (or a reference) showed it wrong: no reset to it
         verdict = self.outage.assess(
-            fix, shown_wrong=self.integrity.fde.shown_wrong(rid), now_s=self.now_s
+            fix,
+            shown_wrong=self.integrity.fde.shown_wrong(rid),
+            now_s=self.now_s,
+            within_bound=self._within_bound,
         )
         outputs += verdict.alerts
         self.watch.gnss_timeout_s = self.outage.timeout_s if self._rhythm.slow else 0.0
@@ -730,6 +762,8 @@ class Engine:
         if not update.fused and update.reason == "gate":
             self.stats.gnss["gate_rejected"] += 1
             self.outage.rejected(fix)
+            if not _position_within_bound(update):
+                self._rejected_beyond_bound.add(rid)
             # the receiver's own evidence vouches for the fix: the gate measured the
             # prediction's error; fused anyway (repeated, the outage monitor resets)
             if self.outage.vouched(fix) and not self.integrity.fde.shown_wrong(rid):
@@ -742,6 +776,7 @@ class Engine:
             self.stats.gnss["fused_vouched" if vouched else "fused"] += 1
             if not vouched:
                 self.outage.used(fix)
+                self._rejected_beyond_bound.discard(rid)
             self.publisher.last_fused_fix = fix
             self.publisher.satellites = fix.satellites or 0
             self.bridge.add_fix(meas)
@@ -765,6 +800,34 @@ class Engine:
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    def _within_bound(self, fix: GnssFix) -> bool:
+        """Has the solution held the receiver of ``fix`` within its bound: every fix of it
+        rejected since its last one used had its horizontal position innovation inside
+        :data:`RESET_ALERT_CHI2` (the gate may have failed on the velocity), and ``fix``
+        itself (carried to the navigator's time by its own velocity) is inside it from the
+        navigator's position, their covariances combined? A reset to it then moves the
+        solution by no more than it said it could be off (outage monitor: not a fault)."""
+        if fix.receiver_id in self._rejected_beyond_bound:
+            return False
+        frame, now = self.frame, self.now_s
+        if frame is None or now is None:
+            return False
+        state = self.navigators.navigator.predict(now)
+        if state is None:
+            return False
+        meas = gnss_measurement(fix, frame)
+        vel = meas.vel_ned_mps[:2]
+        carried = meas.pos_ned_m[:2] + (vel if np.all(np.isfinite(vel)) else 0.0) * (now - fix.t_s)
+        d = state.pos_ned_m[:2] - carried
+        cov = state.pos_cov_ned_m2[:2, :2] + np.diag(meas.pos_var_ned_m2[:2])
+        if not np.all(np.isfinite(d)) or not np.all(np.isfinite(cov)):
+            return False
+        try:
+            d2 = float(d @ np.linalg.solve(cov, d))
+        except np.linalg.LinAlgError:
+            return False
+        return d2 <= RESET_ALERT_CHI2
 
     def _raw_reference(self, t_s: float) -> AnchoredState | None:
         """The raw receiver's carrier-phase solution as a reference for the separation tests
@@ -791,6 +854,7 @@ class Engine:
         self.bridge.restart()
         self.bridge.add_fix(meas)
         self.outage.used(fix)
+        self._rejected_beyond_bound.discard(fix.receiver_id)
         self.stats.gnss["reinitialised"] += 1
         self.publisher.last_fused_fix = fix
         self._fix_fused = True

@@ -33,6 +33,7 @@ Bulletin 2(6), 1946.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from scipy.stats import chi2
@@ -55,6 +56,18 @@ class ImuNoiseVerdict:
     gyro_ratio: float
     acc_ratio: float
     threshold: float
+    rate_hz: float = math.nan
+    """The window's mean sample rate, Hz."""
+    acc_white_var_m2ps4: float = math.nan
+    """The accelerometer's measured white-noise variance per sample (three axes pooled,
+    the message's quantisation removed), (m/s^2)^2."""
+
+    @property
+    def acc_psd_m2ps3(self) -> float:
+        """The accelerometer's measured white-noise PSD, (m/s^2)^2/Hz = m^2/s^3: the
+        variance per sample over the sample rate (what summing the samples times their
+        interval integrates into velocity per second)."""
+        return self.acc_white_var_m2ps4 / self.rate_hz
 
     @property
     def doubted(self) -> bool:
@@ -125,8 +138,14 @@ class ImuNoiseCheck:
         var_g = self.gyro_q**2 * rate + (MRAD**2 / 12.0 if quantised else 0.0)
         var_a = self.acc_q**2 * rate + (MG_MPS2**2 / 12.0 if quantised else 0.0)
         n3 = 18.0 * self._n
+        lsb_var_a = MG_MPS2**2 / 12.0 if quantised else 0.0
         verdict = ImuNoiseVerdict(
-            sample.t_s, self._sum_g / (n3 * var_g), self._sum_a / (n3 * var_a), self.threshold
+            sample.t_s,
+            self._sum_g / (n3 * var_g),
+            self._sum_a / (n3 * var_a),
+            self.threshold,
+            rate,
+            max(self._sum_a / n3 - lsb_var_a, 0.0),
         )
         self._sum_g = self._sum_a = self._sum_dt = 0.0
         self._n = 0

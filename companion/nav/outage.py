@@ -53,6 +53,7 @@ import logging
 import math
 import statistics
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
@@ -223,6 +224,9 @@ class OutageMonitor:
     _checks: ReceiverCheckConfig = field(default_factory=ReceiverCheckConfig)
     resets: int = 0
     """Resets of the navigator to a rejected receiver (bounded rejection)."""
+    resets_within_bound: int = 0
+    """... of which the solution held the receiver's fix within its published bound: the
+    prediction's noise, not a fault (not alerted)."""
     _median_fix_interval_s: float = 0.0
     _fix_intervals_s: deque[float] = field(default_factory=lambda: deque(maxlen=FIX_INTERVALS_KEPT))
     _fix_ages_s: deque[float] = field(default_factory=lambda: deque(maxlen=FIX_INTERVALS_KEPT))
@@ -235,12 +239,20 @@ class OutageMonitor:
     # ------------------------------------------------------------------ per fix
 
     def assess(
-        self, fix: GnssFix, *, shown_wrong: bool = False, now_s: float | None = None
+        self,
+        fix: GnssFix,
+        *,
+        shown_wrong: bool = False,
+        now_s: float | None = None,
+        within_bound: Callable[[GnssFix], bool] | None = None,
     ) -> FixAssessment:
         """Judge one fix by the receiver's own evidence (see the module docstring);
         ``shown_wrong``: an independent source (another receiver, an inertial reference)
         shows this receiver wrong, so a rejection of it is never ended by a reset;
-        ``now_s``: the newest sample time before it (its delivery delay is kept)."""
+        ``now_s``: the newest sample time before it (its delivery delay is kept);
+        ``within_bound``: does the solution already hold this fix within its published
+        bound (then a reset to it moves nothing a pilot was told: counted and logged,
+        not alerted; None: every reset is alerted)."""
         cfg = self.config
         rx = self._receivers.get(fix.receiver_id)
         if rx is None:
@@ -300,7 +312,12 @@ class OutageMonitor:
             self.resets += 1
             log.warning("t=%.2f s: %s (ends the outage)", t, why)
         elif reinit:
-            alerts += self._reset_alert(t, why)
+            if within_bound is not None and within_bound(fix):
+                self.resets += 1
+                self.resets_within_bound += 1
+                log.info("t=%.2f s: %s (within the solution's bound: not alerted)", t, why)
+            else:
+                alerts += self._reset_alert(t, why)
         return FixAssessment(True, "ok", not reinit, reinit, tuple(alerts))
 
     def vouched(self, fix: GnssFix) -> bool:

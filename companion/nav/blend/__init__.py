@@ -40,13 +40,18 @@ Without an autopilot attitude the blend aligns itself (:mod:`.alignment`): level
 the accelerometer at rest, yaw fitted to the GNSS velocity changes once moving; it then
 runs strapdown. Strapdown, the gyro's white noise is measured in use (second differences,
 :mod:`companion.nav.imu_check`): while it exceeds the configured density beyond chance the
-measured density drives the attitude error (``gyro_noise_measured``). The receiver's reported
+measured density drives the attitude error (``gyro_noise_measured``). The accelerometer's
+white noise is measured likewise, in every mode, and drives the velocity error
+(:mod:`.accel_noise`, ``accel_noise_measured``); the receiver's velocity error beyond its
+report, measured by its own positions, widens the velocity R (:mod:`.velocity_error`,
+``vel_error_measured``). The receiver's reported
 accuracies are floored at what the model can
 honour between fixes (``pos_std_floor_m``, ``vel_std_floor_mps``).
 
 Modules: :mod:`.config` (:class:`BlendConfig`), :mod:`.filter` (:class:`BlendNavigator`),
 :mod:`.alignment`, :mod:`.error_model`, :mod:`.history`, :mod:`.measurement`,
-:mod:`.receiver`, :mod:`.adaptive`, :mod:`.diagnostics`. Method notes: ``docs/methods.md``.
+:mod:`.receiver`, :mod:`.adaptive`, :mod:`.accel_noise`, :mod:`.velocity_error`,
+:mod:`.diagnostics`. Method notes: ``docs/methods.md``.
 
 References
 ----------

@@ -75,6 +75,17 @@ class AdaptiveNoise:
         self._accel_psd0 = config.accel_vrw_mps_rts**2
         self.reset()
 
+    def set_base_psd(self, psd_m2ps3: float) -> None:
+        """The accelerometer PSD the bounds ``q_scale_bounds`` are multiples of (the
+        configured one, or the measured one when the IMU is noisier), m^2/s^3."""
+        self._accel_psd0 = psd_m2ps3
+
+    def bounded_psd(self, psd_ned: list[float]) -> list[float]:
+        """``psd_ned`` (3 floats) within the bounds of the base PSD, m^2/s^3."""
+        lo, hi = self.config.q_scale_bounds
+        q0 = self._accel_psd0
+        return [min(max(q, lo * q0), hi * q0) for q in psd_ned]
+
     def reset(self) -> None:
         """Empty the windows."""
         window = self.config.adaptive_window

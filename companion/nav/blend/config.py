@@ -44,6 +44,13 @@ class BlendConfig:
     density drives the attitude error instead: the vibration of a hand or an airframe,
     integrated by the INS as error, is noise a datasheet density does not hold
     (docs/methods.md, "Gyro noise measured in use")."""
+    accel_noise_measured: bool = True
+    """When the accelerometer's measured white noise (second differences of its readings
+    over windows of 500 samples) exceeds ``accel_vrw_mps_rts`` beyond chance, that measured
+    density is the accelerometer noise of the velocity error (the floor of the adaptive
+    one): an airframe's vibration, aliased into the IMU stream, is integrated by the INS
+    as velocity error a datasheet density does not hold (docs/methods.md, "Accelerometer
+    noise measured in use")."""
     gyro_bias_sigma_radps: float = ranged(5.0 * _DEG / _HOUR_S, gt=0.0)
     """Gyro bias 1-sigma, rad/s."""
     gyro_bias_tau_s: float = ranged(3600.0, gt=0.0, finite=False)
@@ -93,6 +100,10 @@ class BlendConfig:
     the filter's model can honour between fixes (docs/methods.md, "Measurement floors")."""
     vel_std_floor_mps: float = ranged(0.02, gt=0.0)
     """Floor of the velocity measurement 1-sigma, m/s (as ``pos_std_floor_m``)."""
+    vel_error_measured: bool = True
+    """Add to the receiver's reported horizontal velocity variance what its own position
+    increments show its velocity errs beyond it (:mod:`companion.nav.blend.velocity_error`;
+    docs/methods.md, "Receiver velocity error measured by its positions")."""
     vel_std_fallback_mps: float = ranged(0.3, gt=0.0)
     """Velocity 1-sigma used when the receiver reported none, m/s."""
     r_scale_bounds: tuple[float, float] = ranged((1.0, 20.0), gt=0.0, finite=False, length=2)

@@ -12,6 +12,7 @@ from collections import deque
 import numpy as np
 
 from companion.nav import ins
+from companion.nav.blend.accel_noise import AccelNoise
 from companion.nav.blend.adaptive import AdaptiveNoise
 from companion.nav.blend.alignment import Alignment, CoarseAligner
 from companion.nav.blend.config import BlendConfig
@@ -32,8 +33,9 @@ from companion.nav.blend.history import (
 )
 from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.rate_drift import RateDrift
-from companion.nav.blend.receiver import ReceiverError
+from companion.nav.blend.receiver import GNSS_ERR_TAU_S, ReceiverError
 from companion.nav.blend.unaided import UnaidedDeparture
+from companion.nav.blend.velocity_error import VelocityErrorMeter
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.imu_check import ImuNoiseCheck, ImuNoiseVerdict
 from companion.nav.kalman import chi2_gate, joseph_update_diag_r, predict_covariance
@@ -97,8 +99,21 @@ class BlendNavigator:
             else None
         )
         """The gyro's measured white noise (kept across restarts: it is the IMU's)."""
+        self._accel_noise = (
+            AccelNoise(cfg.gyro_arw_rad_rts, cfg.accel_vrw_mps_rts)
+            if cfg.accel_noise_measured
+            else None
+        )
+        """The accelerometer's measured white noise (kept across restarts: it is the IMU's)."""
         self._gyro_psd_measured: float | None = None
         """Gyro PSD measured above the configured one (rad^2/s), None while it is not."""
+        self._vel_error = (
+            VelocityErrorMeter(cfg.gnss_white_fraction if self._gm else 1.0)
+            if cfg.vel_error_measured
+            else None
+        )
+        """The receiver's velocity error beyond its report, measured by its positions (kept
+        across restarts: it is the receiver's)."""
         self.rate_drift = RateDrift(cfg.rate_drift_window_s)
         """How far the autopilot's attitude strays from its body rates (kept across
         restarts: it is the autopilot's)."""
@@ -146,6 +161,8 @@ class BlendNavigator:
         self._pre_imu = deque()
         self._p = np.zeros((N_STATE, N_STATE))
         self._rx.reset()
+        if self._vel_error is not None:
+            self._vel_error.restart_chain()
         self._hist: History = deque()
         self._att_q: Quat | None = None
         self._att_t_s = math.nan
@@ -164,6 +181,27 @@ class BlendNavigator:
         self._model.reset(self.diag.accel_psd_ned)
         self._note_gyro_psd()
 
+    def adopt_imu_noise(self, other: BlendNavigator) -> None:
+        """Take over the IMU noise ``other`` measured (its accelerometer's and gyro's, on
+        the same IMU), when both were configured with the same densities: a navigator
+        built afresh (after a silence) need not measure the IMU again."""
+        cfg, ocfg = self.config, other.config
+        if (cfg.accel_vrw_mps_rts, cfg.gyro_arw_rad_rts) != (
+            ocfg.accel_vrw_mps_rts,
+            ocfg.gyro_arw_rad_rts,
+        ):
+            return
+        if self._accel_noise is not None and other._accel_noise is not None:
+            self._accel_noise = other._accel_noise
+            if self._accel_noise.psd_m2ps3 != self._accel_psd0:
+                self._follow_accel_noise(self._accel_noise.psd_m2ps3)
+        if self._gyro_meter is not None and other._gyro_meter is not None:
+            self._gyro_meter = other._gyro_meter
+            if other._gyro_psd_measured != self._gyro_psd_measured:
+                self._gyro_psd_measured = other._gyro_psd_measured
+                self._model.set_gyro_psd(self._gyro_psd_measured)
+                self._note_gyro_psd()
+
     def on_imu(self, sample: ImuSample) -> None:
         """Advance the nominal state with one IMU sample; propagate P every ``cov_interval_s``."""
         acc_t = sample.acc_b_mps2.tolist()
@@ -179,6 +217,9 @@ class BlendNavigator:
             verdict = meter.on_imu(sample)
             if verdict is not None:
                 self._follow_gyro_noise(verdict)
+        accel_noise = self._accel_noise
+        if accel_noise is not None and accel_noise.on_imu(sample):
+            self._follow_accel_noise(accel_noise.psd_m2ps3)
         if self._held_rates:
             gyro_t = held_rate_at(self._held_rates, sample.t_s)
         mech = self._mech
@@ -404,6 +445,8 @@ class BlendNavigator:
         if not (all(map(math.isfinite, z_pos)) and math.isfinite(meas.t_s)):
             return self._refuse(meas, "position_not_finite")
         r_pos_rep, r_vel_rep = self._gnss.reported_variances(meas)
+        if self._vel_error is not None:
+            self._measured_velocity_error(meas, r_pos_rep, r_vel_rep)
         if not self._init:
             vel = meas.vel_ned_mps.tolist()
             self._aligner.on_fix(meas.t_s, vel[0], vel[1])
@@ -580,6 +623,8 @@ class BlendNavigator:
         """Re-express the state in ``new`` (position through geodetic, vectors rotated)."""
         self._frame = new
         self._mech.set_gravity(ins.LocalGravity(new.lat0_rad, new.alt0_m))
+        if self._vel_error is not None:
+            self._vel_error.restart_chain()  # its positions were in the old frame
         if not self._init:
             return
         if self._mech.seg_dt_s > 0.0:
@@ -773,6 +818,46 @@ class BlendNavigator:
         self._gyro_psd_measured = psd
         self._model.set_gyro_psd(psd)
         self._note_gyro_psd()
+
+    def _measured_velocity_error(
+        self, meas: GnssMeasurement, r_pos: list[float], r_vel: list[float]
+    ) -> None:
+        """Add to the horizontal velocity variances ``r_vel`` (in place) what the receiver's
+        own positions show its velocity errs beyond them (:mod:`.velocity_error`)."""
+        meter = self._vel_error
+        if meter is None:
+            return
+        vel = meas.vel_ned_mps
+        pos = meas.pos_ned_m
+        tau = self.config.gnss_err_tau_s or GNSS_ERR_TAU_S.get(meas.fix_type, 300.0)
+        ex_n, ex_e = meter.on_fix(
+            meas.receiver_id,
+            meas.t_s,
+            (float(pos[0]), float(pos[1])),
+            (float(vel[0]), float(vel[1])),
+            (r_pos[0], r_pos[1]),
+            (r_vel[0], r_vel[1]),
+            tau,
+            meas.fix_type,
+        )
+        r_vel[0] += ex_n
+        r_vel[1] += ex_e
+
+    def _follow_accel_noise(self, psd: float) -> None:
+        """The accelerometer PSD measured in use changed (:mod:`.accel_noise`): it drives
+        the velocity error from now on, as the floor of its adaptive estimate."""
+        q0 = self.config.accel_vrw_mps_rts**2
+        if (psd > q0) != (self._accel_psd0 > q0):
+            log.info(
+                "accelerometer noise %s the configured density (%.1fx)",
+                "above" if psd > q0 else "back within",
+                math.sqrt(psd / q0),
+            )
+        self._accel_psd0 = psd
+        self._adaptive.set_base_psd(psd)
+        bounded = self._adaptive.bounded_psd(self.diag.accel_psd_ned.tolist())
+        self.diag.accel_psd_ned = np.array(bounded)
+        self._model.set_accel_psd(self.diag.accel_psd_ned)
 
     def _note_gyro_psd(self) -> None:
         """The gyro PSD in use, in the diagnostics (strapdown only)."""
