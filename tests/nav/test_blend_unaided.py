@@ -40,7 +40,8 @@ def test_unaided_attitude_error_grows_as_a_walk_plus_the_rates_bias_closed_form(
     """Unaided, the heading error is psi0 + w + b t, so its variance is p0 + q t +
     sigma_b^2 t^2 (q the Gauss-Markov driving noise, 2 sigma^2 / tau; the bias's own slow
     walk added); the tilt, and every axis aided, relax to sigma^2 as Gauss-Markov
-    processes, and the bias does not reach them."""
+    processes, and the bias does not reach them. With the tilt unaided too (nothing but
+    GNSS levelled it), every axis grows as the heading."""
     cfg = BlendConfig()
     sig = np.array(cfg.att_err_sigma_rad)
     tau = cfg.att_err_tau_s
