@@ -55,6 +55,7 @@ from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
 from companion.engine.publish import Publisher, publication_time_s, tick
 from companion.engine.silence import StreamWatch
+from companion.engine.tilt_aiding import TiltAiding
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.nav.baro import BaroConfig, BaroHeight, BaroReference
@@ -74,10 +75,12 @@ from companion.types import (
     Alert,
     AlertCode,
     AttitudeSample,
+    AutopilotSolution,
     BaroSample,
     FixType,
     GnssFix,
     HeadingCommand,
+    HeartbeatSample,
     ImuSample,
     LandedState,
     LandedStateSample,
@@ -228,6 +231,8 @@ class Engine:
             VfrHudSample: self._on_vfr_hud,  # type: ignore[dict-item]
             HeadingCommand: self._on_heading_command,  # type: ignore[dict-item]
             RebootEvent: self._on_reboot,  # type: ignore[dict-item]
+            AutopilotSolution: self._on_autopilot_solution,  # type: ignore[dict-item]
+            HeartbeatSample: self._on_heartbeat,  # type: ignore[dict-item]
         }
         self._reset()
 
@@ -267,6 +272,8 @@ class Engine:
         """The autopilot's latest heading (ATTITUDE), uncorrected."""
         self._attitude: AttitudeSample | None = None
         """The latest attitude sample (taken again when the heading correction changes)."""
+        self.tilt_aiding = TiltAiding()
+        """Whether the autopilot's tilt is aided without GNSS (:mod:`.tilt_aiding`)."""
         self.heading = HeadingCorrector(self._heading_config)
         self.baro = BaroHeight(self._baro_config, stats=self.integrity.stats)
         """The barometer's height, calibrated against trusted GNSS (:mod:`companion.nav.baro`);
@@ -562,14 +569,26 @@ class Engine:
             self.navigators.hold_attitude(
                 in_gap and (gap_attitude == "rates" or self.autopilot_fuses_output)
             )
-        # the autopilot's GNSS is ours: through our gap its attitude is unaided too
-        self.navigators.attitude_unaided(in_gap)
+        # the autopilot's GNSS is ours: through our gap its heading is unaided too, and
+        # its tilt when nothing else levels it
+        self.navigators.attitude_unaided(in_gap, tilt=in_gap and self.tilt_aiding.lost)
         self._yaw_rad = sample.yaw_rad
         self._attitude = sample
         self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?
         correction_rad = self.heading.correction_rad
         if self.navigators.on_attitude(sample, correction_rad) and self.coast is not None:
             self.coast.on_attitude(sample, correction_rad)
+        return []
+
+    def _on_autopilot_solution(self, sample: AutopilotSolution) -> list[Output]:
+        aiding = self.tilt_aiding
+        was = aiding.held
+        if aiding.on_solution(sample.t_s, sample.lat_rad, sample.lon_rad) and not was:
+            log.info("t=%.2f s the autopilot holds its position still", sample.t_s)
+        return []
+
+    def _on_heartbeat(self, sample: HeartbeatSample) -> list[Output]:
+        self.tilt_aiding.on_heartbeat(sample.vehicle_type)
         return []
 
     def _on_baro(self, sample: BaroSample) -> list[Output]:

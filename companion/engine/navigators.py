@@ -187,12 +187,13 @@ class Navigators:
         if isinstance(primary, BlendNavigator) and primary.attitude_held is not hold:
             primary.hold_attitude(hold)
 
-    def attitude_unaided(self, unaided: bool) -> None:
+    def attitude_unaided(self, unaided: bool, *, tilt: bool = False) -> None:
         """A GNSS gap the autopilot shares begins (``True``) or ends: its attitude is
-        modelled unaided through it (:meth:`BlendNavigator.attitude_unaided`)."""
+        modelled unaided through it, its tilt too when ``tilt``
+        (:meth:`BlendNavigator.attitude_unaided`)."""
         primary = self.primary
         if isinstance(primary, BlendNavigator):
-            primary.attitude_unaided(unaided)  # also after a restart or a hold released
+            primary.attitude_unaided(unaided, tilt=tilt)  # also after a restart or a hold released
 
     def select(self, now_s: float | None) -> None:
         """The blend carries the solution while it runs on a live, usable IMU stream."""

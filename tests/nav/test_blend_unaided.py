@@ -17,13 +17,15 @@ from tests.nav.test_blend import FRAME, SimSpec, config_for, simulate
 _DEG = math.pi / 180.0
 
 
-def _attitude_var_after(unaided: bool, t_s: float, p0: float, bias_var: float) -> np.ndarray:
+def _attitude_var_after(
+    unaided: bool, t_s: float, p0: float, bias_var: float, *, tilt: bool = False
+) -> np.ndarray:
     """The attitude error's variance (3,) after ``t_s`` at rest (no specific force), level,
     from ``p0`` and the gyro-bias variance ``bias_var`` (uncorrelated)."""
     cfg = BlendConfig(cov_discretisation="van_loan")
     model = ErrorModel(cfg)
     model.reset(np.full(3, cfg.accel_vrw_mps_rts**2))
-    model.set_unaided(unaided)
+    model.set_unaided(unaided, tilt=tilt)
     p = np.zeros((18, 18))
     p[6:9, 6:9] = np.eye(3) * p0
     p[12:15, 12:15] = np.eye(3) * bias_var
@@ -38,7 +40,8 @@ def test_unaided_attitude_error_grows_as_a_walk_plus_the_rates_bias_closed_form(
     """Unaided, the heading error is psi0 + w + b t, so its variance is p0 + q t +
     sigma_b^2 t^2 (q the Gauss-Markov driving noise, 2 sigma^2 / tau; the bias's own slow
     walk added); the tilt, and every axis aided, relax to sigma^2 as Gauss-Markov
-    processes, and the bias does not reach them."""
+    processes, and the bias does not reach them. With the tilt unaided too (nothing but
+    GNSS levelled it), every axis grows as the heading."""
     cfg = BlendConfig()
     sig = np.array(cfg.att_err_sigma_rad)
     tau = cfg.att_err_tau_s
@@ -58,6 +61,13 @@ def test_unaided_attitude_error_grows_as_a_walk_plus_the_rates_bias_closed_form(
     np.testing.assert_allclose(got[:2], gauss_markov[:2], rtol=2e-3)  # tilt: still aided
     aided = _attitude_var_after(False, t, p0, b_var)
     np.testing.assert_allclose(aided, gauss_markov, rtol=2e-3)
+    # the tilt unaided too (nothing levels it): every axis as the heading
+    walk = p0 + q * t + bias_part + q_b * t**3 / 3.0
+    np.testing.assert_allclose(_attitude_var_after(True, t, p0, b_var, tilt=True), walk, rtol=2e-3)
+    # and the tilt flag alone, aided, changes nothing
+    np.testing.assert_allclose(
+        _attitude_var_after(False, t, p0, b_var, tilt=True), gauss_markov, rtol=2e-3
+    )
 
 
 def _fly(unaided_model: bool, seed: int) -> tuple[float, float, bool]:

@@ -207,6 +207,23 @@ def test_copter_gps_outage(copter_flight: dict[str, Any]) -> None:
     _assert_outage_announced(outage)
 
 
+def test_copter_gps_outage_accuracy_covers_the_error(copter_flight: dict[str, Any]) -> None:
+    """Never confidently wrong beside a copter: over the 30 s outage 95 % of the service's
+    positions lie within 2.45 times its published 1-sigma of the truth. A multirotor's
+    filter has nothing but GNSS to level its tilt; its tilt error changed by 0.2 deg over
+    the gap, where the aided tilt model claimed 0.06-0.09 deg: 204 of 301 positions were
+    outside in a measured flight, none with the tilt unaided in five (docs/sitl.md)."""
+    outage = copter_flight["outage"]
+    n = outage["service_with_accuracy"]
+    assert n > 0.8 * 10 * OUTAGE_S
+    assert outage["service_beyond_coverage"] <= 0.05 * n, (
+        outage["service_beyond_coverage"],
+        n,
+        outage["service"],
+        outage["service_h_acc_m_max"],
+    )
+
+
 def test_plane_reboot_and_restart(tmp_path: Path) -> None:
     result = run_scenario(
         RUNNER, ["reboot", "--speedup", "1"], tmp_path / "reboot.json", timeout_s=300.0

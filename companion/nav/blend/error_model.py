@@ -61,7 +61,8 @@ _F_VARIABLE_ENTRIES = [(3, 7), (3, 8), (4, 6), (4, 8), (5, 6), (5, 7)] + _block(
 _F_STRAPDOWN_ENTRIES = _block(6, 12)
 """Strapdown: the C block of the attitude error's gyro-bias coupling."""
 _F_UNAIDED_ENTRIES = [(ins.IA + 2, ins.IBG + j) for j in range(3)]
-"""Attitude-aided, unaided (:meth:`ErrorModel.set_unaided`): the heading row of that block."""
+"""Attitude-aided, unaided (:meth:`ErrorModel.set_unaided`): the heading row of that block
+(the whole block, as strapdown's, when the tilt is unaided too)."""
 
 
 class ErrorModel:
@@ -79,6 +80,7 @@ class ErrorModel:
         self._cfg = cfg
         self._strapdown = cfg.mode == "strapdown"
         self._unaided = False
+        self._tilt_unaided = False
         self._van_loan = cfg.cov_discretisation == "van_loan"
         self._gqg_static = self._static_gqg(cfg)
         self._f_template = np.zeros((N_STATE, N_STATE))
@@ -110,17 +112,21 @@ class ErrorModel:
         self._strapdown = strapdown
         self._rebuild()
 
-    def set_unaided(self, unaided: bool) -> None:
+    def set_unaided(self, unaided: bool, *, tilt: bool = False) -> None:
         """Attitude-aided mode: model the autopilot's heading error as unaided (``True``:
         a GNSS gap it shares) or aided (``False``). Unaided, nothing pulls the heading
         error back: no Gauss-Markov decay about down; the same white noise drives it, and
         the bias of the autopilot's body rates (the gyro-bias states) turns it, as a
-        strapdown's heading. Its tilt keeps the Gauss-Markov model: an autopilot still
-        levels on gravity without GNSS, while its heading in flight is held by the GNSS
-        velocity. No effect in strapdown mode."""
-        if unaided is self._unaided:
+        strapdown's heading. Its tilt keeps the Gauss-Markov model (an autopilot whose
+        filter still has other aiding, an airspeed, keeps levelling it) unless ``tilt``:
+        a filter that has lost all aiding (it holds its position still) no longer
+        separates its tilt from the vehicle's accelerations, and its tilt error is
+        modelled the same way. No effect in strapdown mode."""
+        tilt = unaided and tilt
+        if unaided is self._unaided and tilt is self._tilt_unaided:
             return
         self._unaided = unaided
+        self._tilt_unaided = tilt
         self._rebuild()
 
     def _rebuild(self) -> None:
@@ -137,6 +143,10 @@ class ErrorModel:
         )
         entries = list(_F_VARIABLE_ENTRIES)
         if self._strapdown:
+            entries += _F_STRAPDOWN_ENTRIES
+        elif self._tilt_unaided:
+            for i in range(3):  # no pull back about any axis
+                self._f_template[ins.IA + i, ins.IA + i] = 0.0
             entries += _F_STRAPDOWN_ENTRIES
         elif self._unaided:
             self._f_template[ins.IA + 2, ins.IA + 2] = 0.0  # no pull back about down
@@ -203,7 +213,7 @@ class ErrorModel:
         f0, f1, f2 = f_ned
         c00, c01, c02, c10, c11, c12, c20, c21, c22 = mat_nb
         values = [-f2, f1, f2, -f0, -f1, f0, -c00, -c01, -c02, -c10, -c11, -c12, -c20, -c21, -c22]
-        if self._strapdown:
+        if self._strapdown or self._tilt_unaided:
             values += mat_nb
         elif self._unaided:
             values += (c20, c21, c22)

@@ -147,6 +147,8 @@ class BlendNavigator:
         self.attitude_unaided_flag = False
         """A GNSS gap the autopilot shares: its attitude is modelled as unaided
         (:meth:`attitude_unaided`)."""
+        self.tilt_unaided_flag = False
+        """... and its tilt too (:meth:`attitude_unaided`)."""
         self._unaided_on = False
         """The unaided model is in force (attitude-aided mode, the attitude taken)."""
         self._bg_before_unaided: list[float] | None = None
@@ -341,17 +343,20 @@ class BlendNavigator:
             p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
             log.info("autopilot attitude taken again")
 
-    def attitude_unaided(self, unaided: bool) -> None:
+    def attitude_unaided(self, unaided: bool, *, tilt: bool = False) -> None:
         """``unaided``: a GNSS gap the autopilot shares (its GNSS is ours). Its attitude,
         still taken, is no longer aided by GNSS: its heading error is modelled without the
         Gauss-Markov pull back (:meth:`ErrorModel.set_unaided`), turned by the bias of its
         body rates (the gyro-bias states restart at the variance :attr:`rate_drift`
         bounds, plus ``gyro_instability_radps`` squared, as when the rates carry the
         attitude) and widened by how far its heading departs from those rates
-        (:mod:`.unaided`). ``False``: the aided model again; the attitude error's
+        (:mod:`.unaided`). ``tilt``: its tilt too (no pull back, turned by the same bias):
+        the autopilot has lost all its aiding (:meth:`ErrorModel.set_unaided`).
+        ``False``: the aided model again; the attitude error's
         covariance is kept for the fixes to shrink. Only in attitude-aided mode with the
         autopilot's attitude taken (not held, not strapdown, not the blend's own)."""
         self.attitude_unaided_flag = unaided
+        self.tilt_unaided_flag = unaided and tilt
         self._follow_unaided()
 
     def _follow_unaided(self) -> None:
@@ -366,6 +371,8 @@ class BlendNavigator:
             self._enter_unaided()
         elif not want:
             self._leave_unaided()
+        if self._unaided_on:
+            self._model.set_unaided(True, tilt=self.tilt_unaided_flag)
 
     def _enter_unaided(self) -> None:
         self._unaided_on = True
