@@ -303,9 +303,7 @@ def test_an_autopilot_reboot_during_a_silence_ends_it_and_restarts_everything():
     assert engine.watch.silent
     reboot = RebootEvent(t_s=1.0, t_rx_s=41.0, previous_t_s=30.0)
     out = engine.handle(reboot)
-    assert [a.text for a in alerts(out, AlertCode.DATA_BACK)] == [
-        "reboot: restart from next fix"
-    ]
+    assert [a.text for a in alerts(out, AlertCode.DATA_BACK)] == ["reboot: restart from next fix"]
     assert engine.stats.reboots == 1 and not engine.watch.silent
     out = drive(engine, list(line_stream(10.0, line=line, t0_s=1.5)))
     assert [o for o in out if isinstance(o, NavSolution)]
