@@ -203,19 +203,27 @@ PX4_FLAGS = ("cs_aux_gpos", "cs_fake_pos", "cs_inertial_dead_reckoning")
 position, the fake position at the last known one, dead reckoning."""
 
 
-def px4_flags(workdir: Path) -> dict[str, list[tuple[float, bool]]]:
-    """Each of :data:`PX4_FLAGS` as it changed, ``{flag: [(t_s, on), ...]}``, from the
-    flight log PX4 wrote (empty when none could be read)."""
+def _px4_log(workdir: Path, topic: str) -> Any:
+    """PX4's newest flight log with ``topic`` read (a pyulog ULog), or None when there is
+    none or it cannot be read."""
     try:
         from pyulog import ULog
     except ImportError:
-        return {}
+        return None
     logs = sorted((workdir / "px4-work" / "log").glob("*/*.ulg"))
     if not logs:
-        return {}
+        return None
     try:
-        ulog = ULog(str(logs[-1]), ["estimator_status_flags"])
+        return ULog(str(logs[-1]), [topic])
     except (OSError, ValueError, IndexError, KeyError, EOFError):
+        return None
+
+
+def px4_flags(workdir: Path) -> dict[str, list[tuple[float, bool]]]:
+    """Each of :data:`PX4_FLAGS` as it changed, ``{flag: [(t_s, on), ...]}``, from the
+    flight log PX4 wrote (empty when none could be read)."""
+    ulog = _px4_log(workdir, "estimator_status_flags")
+    if ulog is None:
         return {}
     out: dict[str, list[tuple[float, bool]]] = {}
     for data in ulog.data_list:
@@ -237,16 +245,8 @@ def px4_biases(workdir: Path, times: list[float]) -> dict[str, list[list[float]]
     """EKF2's accelerometer (m/s^2) and gyro (rad/s) bias estimates at ``times``
     (``estimator_sensor_bias``, from PX4's flight log): HIGHRES_IMU and ATTITUDE's body rates
     are PX4's sensors less these, so what PX4 learns from a fused input moves them."""
-    try:
-        from pyulog import ULog
-    except ImportError:
-        return {}
-    logs = sorted((workdir / "px4-work" / "log").glob("*/*.ulg"))
-    if not logs:
-        return {}
-    try:
-        ulog = ULog(str(logs[-1]), ["estimator_sensor_bias"])
-    except (OSError, ValueError, IndexError, KeyError, EOFError):
+    ulog = _px4_log(workdir, "estimator_sensor_bias")
+    if ulog is None:
         return {}
     out: dict[str, list[list[float]]] = {}
     for data in ulog.data_list:
