@@ -82,26 +82,16 @@ class ErrorModel:
         self._unaided = False
         self._tilt_unaided = False
         self._van_loan = cfg.cov_discretisation == "van_loan"
-        self._gqg_static = self._static_gqg(cfg)
         self._f_template = np.zeros((N_STATE, N_STATE))
-        self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
-            np.zeros(3),
-            np.zeros((3, 3)),
-            strapdown=self._strapdown,
-            tau_att_s=cfg.att_err_tau_s,
-            tau_ba_s=cfg.accel_bias_tau_s,
-            tau_bg_s=cfg.gyro_bias_tau_s,
-        )
         self._f_flat = self._f_template.reshape(-1)  # a view: writes fill the template
-        self._f_idx = _flat_index(
-            _F_VARIABLE_ENTRIES + (_F_STRAPDOWN_ENTRIES if self._strapdown else [])
-        )
         self._accel_psd_ned = np.zeros(3)
         self._gyro_psd: float | None = None
         self._gb_var: FloatArray | None = None
         self._gb_tau_s = 300.0
-        self.gqg = self._make_gqg()
-        """Diagonal (18,) of the continuous noise intensity G Qc G^T in use."""
+        self._rebuild()  # F's constant entries, the static noise, ``gqg``
+
+    gqg: FloatArray
+    """Diagonal (18,) of the continuous noise intensity G Qc G^T in use."""
 
     def set_strapdown(self, strapdown: bool) -> None:
         """Model the attitude error as a strapdown's (gyro noise and bias, ``True``) or as
@@ -130,7 +120,7 @@ class ErrorModel:
         self._rebuild()
 
     def _rebuild(self) -> None:
-        """F's constant entries and the static noise after a change of attitude model."""
+        """F's constant entries and the static noise for the attitude model in use."""
         cfg = self._cfg
         self._gqg_static = self._static_gqg(cfg)
         self._f_template[: ins.N_ERR, : ins.N_ERR] = ins.error_model_f(
