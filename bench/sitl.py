@@ -6,11 +6,14 @@ Runs ``tests.sitl.ardupilot_runner`` inside ``private-net`` (the simulators are 
 in ``../shared/sitl`` or ``$COMPANION_SITL_DIR``; nothing runs without them) and prints
 one table: per scenario, the horizontal error (mean / 95th percentile / max, m) of the
 service and of the autopilot's EKF3 against the simulator's truth over the healthy
-cruise and over the GPS outage, GNSS_LOST and GNSS_BACK latencies, and the alerts that
-should not be there. Then the plane circuit again with the service feeding the
-autopilot (``--feed``: its GPS 2, taken while GPS 1 is lost), ``--feed-runs`` times: the
-autopilot's own error over the outage with the service and without it (the first
-flight). All times are the autopilot's; ``--speedup`` changes only the wall time.
+cruise (the copter: and a hover) and over the GPS outage (the copter's cut as it turns
+at a corner; how far the true course turned in it), GNSS_LOST and GNSS_BACK latencies,
+and the alerts that should not be there. Then the plane and copter circuits again with
+the service feeding the autopilot (``--feed``: its GPS 2, taken while GPS 1 is lost),
+``--feed-runs`` and ``--copter-feed-runs`` times: the autopilot's own error over the
+outage with the service and without it (the first flight), also with its last position
+held where it published none. All times are the autopilot's; ``--speedup`` changes
+only the wall time.
 
     python bench/sitl.py                      # 5 min cruise, 30 s outage
     python bench/sitl.py --cruise-s 600 --speedup 3 --json out.json
@@ -51,7 +54,11 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
     print(f"\n{name}")
     print(f"  {'phase':30s} {'service':>22s} {'autopilot EKF3':>22s}")
     span = healthy["t1_s"] - healthy["t0_s"]
-    rows = [
+    rows = []
+    if "hover" in flight:
+        hover = flight["hover"]
+        rows.append((f"hover ({hover['t1_s'] - hover['t0_s']:.0f} s)", hover))
+    rows += [
         (f"healthy cruise ({span:.0f} s)", healthy),
         (f"GPS outage ({outage['t_on_s'] - outage['t_off_s']:.0f} s)", outage),
         ("after GPS returns (+5 s on)", flight["after"]),
@@ -66,8 +73,10 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
     )
     print(
         f"  the autopilot published no position for {outage['autopilot_max_gap_s']:.1f} s "
-        "of the outage (longest gap)"
+        "of the outage (longest gap); its last one held through its gaps: "
+        f"{_fmt(outage['autopilot_held'])}"
     )
+    print(f"  the true course turned by {outage['truth_turn_deg']:.0f} deg over the outage")
     print(
         f"  GNSS_LOST {_latency(outage['gnss_lost_latency_s'])} after the GPS went off, "
         f"GNSS_BACK {_latency(outage['gnss_back_latency_s'])} after it returned"
@@ -82,8 +91,12 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
         for k in range(0, len(per_second), 6):
             row = per_second[k : k + 6]
             print("    " + "  ".join(f"{s:4.0f} s {e:5.1f}/{2.45 * h:5.1f}" for s, e, h in row))
-    unwanted = [(t, a) for t, a in healthy["alerts"] if a.split()[1] in UNWANTED]
-    print(f"  unwanted alerts in the healthy cruise: {len(unwanted)}")
+    unwanted = [
+        (t, a)
+        for t, a in healthy["alerts"] + flight.get("hover", {}).get("alerts", [])
+        if a.split()[1] in UNWANTED
+    ]
+    print(f"  unwanted alerts in the hover and the healthy cruise: {len(unwanted)}")
     for t, a in unwanted[:10]:
         print(f"    {t:8.2f} s  {a}")
     print("  alerts from the GPS cut on:")
@@ -91,22 +104,31 @@ def _print_flight(name: str, flight: dict[str, Any]) -> None:
         print(f"    {t:8.2f} s  {a}")
 
 
-def _print_fed(alone: dict[str, Any], feds: list[dict[str, Any]]) -> None:
+def _print_fed(name: str, alone: dict[str, Any], feds: list[dict[str, Any]]) -> None:
     span = alone["outage"]["t_on_s"] - alone["outage"]["t_off_s"]
     print(
-        f"\nplane circuit, the autopilot's own error (EKF3) over the {span:.0f} s outage, "
-        "with the service feeding its GPS 2 and without"
+        f"\n{name}, the autopilot's own error (EKF3) over the {span:.0f} s outage, "
+        "with the service feeding its GPS 2 and without (held: its last position standing "
+        "in where it published none; pre-cut: the healthy cruise)"
     )
-    print(f"  {'run':34s} {'autopilot EKF3':>22s} {'service':>22s}")
-    out = alone["outage"]
-    print(f"  {'alone (not fed)':34s} {_fmt(out['autopilot']):>22s} {_fmt(out['service']):>22s}")
+    print(
+        f"  {'run':18s} {'EKF3 pre-cut':>20s} {'EKF3':>20s} {'EKF3 held':>20s} "
+        f"{'no position':>11s} {'service':>20s}"
+    )
+    for label, run in [("alone (not fed)", alone)] + [
+        (f"fed, run {k}", fed) for k, fed in enumerate(feds, 1)
+    ]:
+        out = run["outage"]
+        print(
+            f"  {label:18s} {_fmt(run['healthy']['autopilot']):>20s} "
+            f"{_fmt(out['autopilot']):>20s} {_fmt(out['autopilot_held']):>20s} "
+            f"{out['autopilot_max_gap_s']:9.1f} s {_fmt(out['service']):>20s}"
+        )
     for k, fed in enumerate(feds, 1):
         out = fed["outage"]
-        label = f"fed, run {k}"
-        print(f"  {label:34s} {_fmt(out['autopilot']):>22s} {_fmt(out['service']):>22s}")
         lag = fed.get("feed_lag_s")
         print(
-            "    the autopilot's stamps of our fixes trail the truth by "
+            f"  fed, run {k}: the autopilot's stamps of our fixes trail the truth by "
             + ("-" if lag is None else f"{lag * 1000:.0f} ms")
             + f"; the service beyond 2.45 x its published 1-sigma in "
             f"{out['service_beyond_coverage']} of {out['service_with_accuracy']} positions; "
@@ -131,6 +153,12 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=1,
         help="plane circuits with the service feeding the autopilot's GPS 2; 0: none",
+    )
+    p.add_argument(
+        "--copter-feed-runs",
+        type=int,
+        default=1,
+        help="copter circuits with the service feeding the autopilot's GPS 2; 0: none",
     )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
     p.add_argument(
@@ -172,6 +200,9 @@ def main(argv: list[str] | None = None) -> int:
                 f"{args.outage_s:g}",
                 "--after-s",
                 "20",
+                "--hover-s",
+                "30",
+                "--outage-at-corner",
                 "--params",
                 args.params,
             ],
@@ -179,6 +210,8 @@ def main(argv: list[str] | None = None) -> int:
         }
         for k in range(args.feed_runs):
             runs[f"plane circuit fed {k + 1}"] = [*runs["plane circuit"], "--feed"]
+        for k in range(args.copter_feed_runs):
+            runs[f"copter circuit fed {k + 1}"] = [*runs["copter circuit"], "--feed"]
         for name, run_args in runs.items():
             out = Path(tmp) / f"{name.replace(' ', '_')}.json"
             timeout_s = 120.0 + 3.0 * (args.cruise_s + args.outage_s + args.after_s + 120.0)
@@ -187,9 +220,13 @@ def main(argv: list[str] | None = None) -> int:
     print("horizontal error vs SITL truth, m: mean / p95 / max")
     for name in ("plane circuit", "copter circuit"):
         _print_flight(name, results[name])
-    feds = [results[f"plane circuit fed {k + 1}"] for k in range(args.feed_runs)]
-    if feds:
-        _print_fed(results["plane circuit"], feds)
+    for name, n_runs in (
+        ("plane circuit", args.feed_runs),
+        ("copter circuit", args.copter_feed_runs),
+    ):
+        feds = [results[f"{name} fed {k + 1}"] for k in range(n_runs)]
+        if feds:
+            _print_fed(name, results[name], feds)
     for event in results["plane reboot"]["events"]:
         delay = event["resume_delay_s"]
         print(

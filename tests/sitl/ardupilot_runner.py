@@ -59,6 +59,8 @@ COPTER_AUTO, COPTER_GUIDED = 3, 4
 COPTER_ALT_M = 25.0
 HOME_LAT, HOME_LON, HOME_ALT = -35.363261, 149.165230, 584.0
 CRUISE_ALT_M = 80.0
+HOVER_SETTLE_S = 5.0
+"""Copter ``--hover-s``: held this long after the take-off before the hover is scored."""
 FEED_LAG_MS = 30
 """``GPS2_DELAY_MS`` for the service's GPS_INPUT: it carries its solution to the newest
 autopilot time it has, so the lag is the link's and its own processing (measured against
@@ -177,8 +179,57 @@ def _timed_errors(
     return times, errors
 
 
+def held_errors(
+    log: SitlLog, track: Track, t0: float, t1: float, step_s: float = 0.1
+) -> list[float]:
+    """Horizontal errors against the truth every ``step_s`` in [t0, t1] of ``track``
+    (interpolated), and across its gaps of its newest point before: where the autopilot
+    publishes no position (EKF3 given up) its last one stands for it, the best a user of
+    it could do."""
+    out = []
+    for k in range(int((t1 - t0) / step_s) + 1):
+        t = t0 + k * step_s
+        ref = log.truth.at(t)
+        pos = track.at(t)
+        if pos is None and (i := bisect.bisect_right(track.t_s, t)) > 0:
+            pos = (track.lat_deg[i - 1], track.lon_deg[i - 1])
+        if ref is not None and pos is not None:
+            out.append(harness.horizontal_m(ref[0], ref[1], pos[0], pos[1]))
+    return out
+
+
+def truth_turn_deg(log: SitlLog, t0: float, t1: float, step_s: float = 1.0) -> float:
+    """How far the simulator's true course turned in [t0, t1], deg: the sum of the absolute
+    changes of the course over ``step_s`` chords (chords under 1 m/s left out: a hover has
+    no course)."""
+    courses: list[float] = []
+    t = t0
+    while t + step_s <= t1:
+        a, b = log.truth.at(t), log.truth.at(t + step_s)
+        if a is not None and b is not None:
+            north = (b[0] - a[0]) * math.radians(1.0) * harness.EARTH_RADIUS_M
+            east = (
+                (b[1] - a[1])
+                * math.radians(1.0)
+                * harness.EARTH_RADIUS_M
+                * math.cos(math.radians(a[0]))
+            )
+            if math.hypot(north, east) >= 1.0 * step_s:
+                courses.append(math.degrees(math.atan2(east, north)))
+        t += step_s
+    turns = [
+        (b - a + 180.0) % 360.0 - 180.0 for a, b in zip(courses[:-1], courses[1:], strict=True)
+    ]
+    return sum(abs(d) for d in turns)
+
+
 def score_flight(
-    log: SitlLog, tap: ServiceTap, t_cruise_s: float, t_end_s: float, outage: bool
+    log: SitlLog,
+    tap: ServiceTap,
+    t_cruise_s: float,
+    t_end_s: float,
+    outage: bool,
+    hover: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
     service = Track()
     for t, lat, lon, _alt in tap.positions:
@@ -200,6 +251,14 @@ def score_flight(
         "truth_points": len(log.truth.t_s),
         "service_points": len(service.t_s),
     }
+    if hover is not None:
+        out["hover"] = {
+            "t0_s": hover[0],
+            "t1_s": hover[1],
+            "service": _stats(log.errors(service, *hover)),
+            "autopilot": _stats(log.errors(log.autopilot, *hover)),
+            "alerts": _alerts_in(tap, *hover),
+        }
     if outage:
         if t_off is None or t_on is None:
             raise RuntimeError(f"outage not found in the log's PARM records: {gps}")
@@ -214,6 +273,8 @@ def score_flight(
             ),
             "service": _stats(log.errors(service, t_off, t_on)),
             "autopilot": _stats(log.errors(log.autopilot, t_off, t_on)),
+            "autopilot_held": _stats(held_errors(log, log.autopilot, t_off, t_on)),
+            "truth_turn_deg": truth_turn_deg(log, t_off, t_on),
             "gnss_lost_latency_s": (lost[0] - t_off) if lost else None,
             "gnss_back_latency_s": (back[0] - t_on) if back else None,
             "alerts": _alerts_in(tap, t_off - 1.0, t_end_s),
@@ -246,9 +307,11 @@ def score_flight(
 
 def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
     tap, gcs = _start(procs, args.vehicle, args)
+    hover: tuple[float, float] | None = None
     try:
         gcs.wait_booted()
         gcs.set_message_rate("GLOBAL_POSITION_INT", 5.0)
+        gcs.set_message_rate("MISSION_CURRENT", 5.0)
         gcs.set_param("LOG_DISARMED", 1)
         gcs.set_param("SIM_GPS1_ENABLE", 1)
         params = {**(FEED_PARAMS if args.feed else {}), **json.loads(args.params)}
@@ -272,10 +335,23 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
             t_armed = gcs.now()
             gcs.command(MAV.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, COPTER_ALT_M)
             gcs.wait_until(lambda: rel_alt() > COPTER_ALT_M - 3.0, 120.0, "take-off")
+            if args.hover_s > 0:  # held where the take-off ended, then scored
+                gcs.sleep(HOVER_SETTLE_S)
+                hover = (gcs.now(), gcs.now() + args.hover_s)
+                gcs.sleep(args.hover_s)
             gcs.set_mode(COPTER_AUTO)
         gcs.sleep(args.settle_s)
         t_cruise = gcs.now()
         gcs.sleep(args.cruise_s)
+        if args.outage_at_corner:  # the gap starts as the vehicle turns at the next corner
+
+            def corner() -> bool:
+                seq = gcs.latest.get("MISSION_CURRENT")
+                return seq is not None and seq.seq != seq_at_cruise_end
+
+            current = gcs.latest.get("MISSION_CURRENT")
+            seq_at_cruise_end = None if current is None else current.seq
+            gcs.wait_until(corner, 120.0, "the next corner")
         if args.outage_s > 0:
             gcs.set_param("SIM_GPS1_ENABLE", 0)
             gcs.sleep(args.outage_s)
@@ -289,7 +365,7 @@ def fly(args: argparse.Namespace, procs: Processes) -> dict[str, Any]:
         _stop(procs, tap, gcs)
     log_path = newest_log(procs.workdir)
     log = read_log(log_path)
-    result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0)
+    result = score_flight(log, tap, t_cruise, t_end, args.outage_s > 0, hover)
     # how far GPS_RAW_INT's time_usec trails the fix's time of validity: what GPS1_DELAY_MS
     # should be (the simulator's SIM_GPS1_LAG_MS is not that lag as the autopilot stamps it)
     tlogs = sorted((procs.workdir / "companion-logs").glob("*.tlog"))
@@ -441,6 +517,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cruise-s", type=float, default=60.0)
     p.add_argument("--outage-s", type=float, default=0.0)
     p.add_argument("--after-s", type=float, default=30.0)
+    p.add_argument(
+        "--hover-s",
+        type=float,
+        default=0.0,
+        help="copter: hover where the take-off ends this long (scored) before the mission",
+    )
+    p.add_argument(
+        "--outage-at-corner",
+        action="store_true",
+        help="after the cruise, cut the GPS as the mission turns to its next corner",
+    )
     p.add_argument("--throttle-pwm", type=int, default=1350, help="taxi: RC 3 override")
     p.add_argument("--params", default="{}", help="autopilot parameters to set (JSON)")
     p.add_argument(
