@@ -241,7 +241,7 @@ def candidates(p: Param, current: Any) -> list[float]:
         return [float(i) for i in range(len(p.choices)) if p.choices[i] != current]
     if p.choices:  # an integer enumeration
         return [float(int(c)) for c in p.choices if c != current]
-    if current is None:
+    if current is None or (isinstance(current, float) and not math.isfinite(current)):
         return [1.0, 5.0, 100.0]
     if p.kind == "int":
         return [float(current + 1), float(current - 1), float(current + 10)]

@@ -6,6 +6,7 @@ relates two fields (``status_rate_hz <= publish_rate_hz``) is written out.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from companion.ranges import check_ranges, ranged
@@ -68,6 +69,12 @@ class EngineConfig:
     trusted again. Fed to the end, the autopilot follows a slowly drifting solution with
     its own attitude and wind; from there its own dead reckoning serves it better.
     ``inf``: the whole gap is fed."""
+    gap_feed_no_airspeed_max_h_acc_m: float = ranged(math.inf, gt=0.0, finite=False)
+    """The same limit when the autopilot's airframe has no airspeed (HEARTBEAT: a
+    multirotor or a helicopter). Its filter cannot dead-reckon without a position source:
+    ArduCopter's EKF3, the fix withdrawn, declared an EKF failsafe (LAND) 8 s later and
+    stopped aiding 7 s after that, its position held still while the copter flew on; fed
+    to the end of a 30 s gap it stayed on our solution. ``inf`` (default): fed throughout."""
     primary_receiver: int = ranged(0, choices=(0, 1))
     """The receiver fused normally; the other is fused only while this one is unusable
     (and is always the integrity monitor's independent solution)."""

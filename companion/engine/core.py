@@ -1037,13 +1037,19 @@ class Engine:
 
     def _feed_or_withdraw(self, out: Output) -> Output:
         """Through a gap, the solution for an autopilot that fuses it: "no fix" once its
-        horizontal accuracy has passed ``gap_feed_max_h_acc_m``, until GNSS is trusted."""
+        horizontal accuracy has passed ``gap_feed_max_h_acc_m`` (a multirotor's:
+        ``gap_feed_no_airspeed_max_h_acc_m``), until GNSS is trusted."""
         if not isinstance(out, NavSolution):
             return out
         if self.outage.mode not in OUTAGE_MODES:
             self._feed_withdrawn = False
             return out
-        if not self._feed_withdrawn and out.h_acc_m > self.config.gap_feed_max_h_acc_m:
+        limit_m = (
+            self.config.gap_feed_no_airspeed_max_h_acc_m
+            if self.tilt_aiding.no_airspeed
+            else self.config.gap_feed_max_h_acc_m
+        )
+        if not self._feed_withdrawn and out.h_acc_m > limit_m:
             self._feed_withdrawn = True
             self.stats.gnss["gap_feed_withdrawn"] += 1
             log.info(
