@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from companion.engine import Engine, EngineConfig
-from companion.types import AttitudeSample, FixType, NavMode, NavSolution
+from companion.types import AttitudeSample, FixType, HeartbeatSample, NavMode, NavSolution
 from tests.helpers import ORIGIN, Line, line_stream
 
 GAP = (10.0, 20.0)
@@ -97,4 +97,34 @@ def test_fix_withdrawn_past_the_accuracy_limit() -> None:
     assert all(h for t, h in held if T0 + GAP[0] + 1.5 <= t < T0 + GAP[1])
     after = [s for s in sols if s.t_s > T0 + GAP[1] and s.mode is NavMode.NORMAL]
     assert after and all(s.fix_type is FixType.RTK_FIXED for s in after)
+    assert engine.stats.gnss["gap_feed_withdrawn"] == 1
+
+
+def _multirotor(engine: Engine) -> Engine:
+    """The engine told by the autopilot's HEARTBEAT that it flies a quadrotor."""
+    engine.handle(HeartbeatSample(0.0, 0.0, 1, 3, 2, True, 4))
+    return engine
+
+
+def test_a_multirotor_is_fed_through_the_whole_gap() -> None:
+    """A multirotor's filter cannot dead-reckon without a position source (ArduCopter:
+    EKF failsafe, then its position held still): it is fed through the gap whatever the
+    fixed wing's limit (``gap_feed_no_airspeed_max_h_acc_m``, inf by default)."""
+    engine = _multirotor(Engine(EngineConfig(gap_feed_max_h_acc_m=0.05)))
+    engine.autopilot_fuses_output = True
+    sols: list[NavSolution] = []
+    _fly(engine, sols)
+    gap = [s for s in sols if T0 + GAP[0] + 1.5 <= s.t_s < T0 + GAP[1]]
+    assert gap and max(s.h_acc_m for s in gap) > 0.05
+    assert all(s.fix_type >= FixType.FIX_3D for s in gap)
+    assert engine.stats.gnss["gap_feed_withdrawn"] == 0
+
+
+def test_a_multirotor_has_its_own_limit() -> None:
+    engine = _multirotor(Engine(EngineConfig(gap_feed_no_airspeed_max_h_acc_m=0.05)))
+    engine.autopilot_fuses_output = True
+    sols: list[NavSolution] = []
+    _fly(engine, sols)
+    gap = [s for s in sols if T0 + GAP[0] + 1.5 <= s.t_s < T0 + GAP[1]]
+    assert any(s.fix_type is FixType.NO_FIX for s in gap)
     assert engine.stats.gnss["gap_feed_withdrawn"] == 1
