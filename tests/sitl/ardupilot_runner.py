@@ -7,9 +7,13 @@ Scenarios:
   in a loop; ``--vehicle copter``: ArduCopter, a guided take-off to 25 m, then a
   200 x 120 m rectangle), cruises with a healthy GPS for ``--cruise-s``, then (``--outage-s`` > 0)
   loses GPS 1 (``SIM_GPS1_ENABLE = 0``) for that long and flies ``--after-s`` more.
+  ``--hover-s``: the copter first hovers where its take-off ended (scored as ``hover``);
+  ``--outage-at-corner``: the GPS is cut when the mission next turns to a new corner.
   Scored from SITL's DataFlash log: the service's and the autopilot's (POS, EKF3)
   horizontal errors against the simulator's truth (SIM) over the healthy cruise and over
-  the outage, and the service's alerts with their times. ``--feed``: the autopilot takes
+  the outage (also EKF3's last position held where it published none:
+  ``autopilot_held``; and how far the true course turned), and the service's alerts
+  with their times. ``--feed``: the autopilot takes
   the service's GPS_INPUT as its GPS 2 and switches to it while GPS 1 has no 3-D fix
   (:data:`FEED_PARAMS`); the result then also says how far the autopilot's stamps of our
   fixes trail the truth and how often the service's error exceeded 2.45 times its

@@ -6,10 +6,11 @@ the outage tests: a mission circuit, ``CRUISE_S`` of healthy GPS, 30 s without G
 SITL's ``SIM_GPS1_LAG_MS`` (100 ms), which EKF3 and the service both use; the service
 does not feed the autopilot (no GPS of type 14), except in ``plane_fed``: a shorter
 flight flown twice, once with the autopilot taking the service's solution as its GPS 2
-while GPS 1 is lost, to compare the autopilot's own outage error. The lag as the
-autopilot stamps it is shorter (``SITL_GPS_LAG_MS``, measured in every flight): see the
-p95 test. The speed-up (``COMPANION_SITL_SPEEDUP``, default 5) changes only the wall
-time: every score is on the autopilot's clock against the simulator's truth.
+while GPS 1 is lost, to compare the autopilot's own outage error. The copter hovers,
+flies its circuit, loses GPS 1 in a turn, and is flown twice the same way, alone and
+fed. The lag as the autopilot stamps it is shorter (``SITL_GPS_LAG_MS``, measured in
+every flight): see the p95 test. The speed-up (``COMPANION_SITL_SPEEDUP``, default 5)
+changes only the wall time: every score is on the autopilot's clock against the simulator's truth.
 ``python bench/sitl.py`` flies the same scenarios longer and prints the figures.
 """
 
