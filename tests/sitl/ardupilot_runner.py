@@ -547,9 +547,11 @@ def main(argv: list[str] | None = None) -> int:
             scenario = {"flight": fly, "reboot": reboot, "taxi": taxi}[args.scenario]
             result = scenario(args, procs)
         except Exception:
-            traceback.print_exc()
             for name in ("sitl", "companion"):
                 print(f"--- {name} log tail ---\n{procs.tail(name)}", file=sys.stderr)
+            # last: the test shows only the output's tail
+            print("--- runner ---", file=sys.stderr)
+            traceback.print_exc()
             return 1
     result["args"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
     args.out.write_text(json.dumps(result, indent=1))
