@@ -237,6 +237,15 @@ def test_copter_hover_error(copter_flight: dict[str, Any]) -> None:
     assert svc["mean_m"] <= ap["mean_m"], (svc, ap)
 
 
+def test_copter_mission_healthy(copter_flight: dict[str, Any]) -> None:
+    healthy = copter_flight["healthy"]
+    assert _alerts(healthy, "GNSS_STALE", "GNSS_LOST", "FAULT", "BRIDGING") == []
+    svc, ap = healthy["service"], healthy["autopilot"]
+    assert svc["n"] > 0.8 * 10 * 60.0
+    assert svc["mean_m"] <= ap["mean_m"], (svc, ap)
+    assert svc["p95_m"] <= ap["p95_m"], (svc, ap)
+
+
 def test_copter_gps_outage(copter_flight: dict[str, Any]) -> None:
     """ArduCopter's EKF3 gives up some 8 s into the outage (EKF failsafe: LAND, no
     position for the rest of it): the service must publish throughout, announce both
