@@ -226,7 +226,7 @@ def test_copter_hover_healthy(copter_flight: dict[str, Any]) -> None:
 
 
 @pytest.mark.xfail(
-    strict=True,
+    strict=False,  # the two sometimes tie within the resolution: an XPASS must not fail CI
     reason="in a still hover the service is 1.4-1.9 cm off the truth, EKF3 0.7-1.1 cm (mean, "
     "five flights of this test's; 1.1-1.3 against 1.1 cm in the bench's 30 s hovers): both "
     "within two steps of the positions' 1e-7 deg resolution, the service's filter wandering "
