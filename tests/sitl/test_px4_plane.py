@@ -78,7 +78,10 @@ def test_the_plane_flies_the_circle(flight: dict[str, Any]) -> None:
 
 def test_healthy_cruise(flight: dict[str, Any]) -> None:
     """No GNSS_STALE, GNSS_LOST or FAULT from take-off to the cut, and the service's
-    horizontal error over the cruise no larger than PX4's own (same flight)."""
+    horizontal error over the cruise no larger than PX4's own (same flight). PX4's own
+    here fuses the service and is 0.75 m off in cruise where alone it is 6 cm off
+    (docs/sitl.md); against PX4 alone the service's 3-5 cm mean was below its 6 cm in
+    the bench's flights, too close to assert in one."""
     bad = _alerts(flight, BAD_IN_CRUISE, flight["t_takeoff_s"], flight["t_cut_s"])
     assert not bad, bad
     svc, px4 = flight["service_pre"], flight["px4_pre"]
