@@ -13,6 +13,12 @@ that estimate). PX4 runs in real time; all times are its own: check the machine'
 
     python bench/sitl_px4.py                 # 2 runs each, 20 s cut
     python bench/sitl_px4.py --runs 3 --cut-s 30 --json out.json
+
+``--airframe 10041``: the SIH airplane (runway take-off, then PX4's Hold loiter circle,
+``--cruise-s`` of it before the cut, 120 s by default), with the service's own error
+over the cruise and the cut and its GNSS_LOST / GNSS_BACK latencies beside PX4's.
+
+    python bench/sitl_px4.py --airframe 10041 --runs 2
 """
 
 from __future__ import annotations
@@ -50,8 +56,16 @@ def _bias_change(r: dict[str, Any]) -> str:
     return f"{1e3 * (x1 - x0):+.1f},{1e3 * (y1 - y0):+.1f}"
 
 
+PLANE = 10041
+
+
 def run_px4(
-    runs: int, cut_s: float, after_s: float, engine: list[str] | None = None
+    runs: int,
+    cut_s: float,
+    after_s: float,
+    engine: list[str] | None = None,
+    airframe: int = 10040,
+    cruise_s: float = 120.0,
 ) -> dict[str, list[dict[str, Any]]]:
     """``runs`` flights with the fusion on and as many with it off (alternating)."""
     results: dict[str, list[dict[str, Any]]] = {"with": [], "without": []}
@@ -67,10 +81,14 @@ def run_px4(
                     "--after-s",
                     f"{after_s:g}",
                 ]
+                if airframe == PLANE:
+                    args += ["--airframe", str(PLANE), "--climb-s", "25"]
+                    args += ["--hover-s", f"{cruise_s:g}", "--pre-window-s", f"{cruise_s:g}"]
                 for setting in engine or []:
                     args += ["--engine", setting]
                 out = Path(tmp) / f"px4_{key}_{k}.json"
-                result = run_scenario(RUNNER, args, out, timeout_s=300.0 + 3.0 * cut_s)
+                timeout_s = 300.0 + 3.0 * cut_s + (2.0 * cruise_s if airframe == PLANE else 0.0)
+                result = run_scenario(RUNNER, args, out, timeout_s=timeout_s)
                 result.pop("companion_log_tail", None)
                 result.pop("_output_tail", None)
                 results[key].append(result)
@@ -110,11 +128,60 @@ def print_px4(results: dict[str, list[dict[str, Any]]], cut_s: float) -> None:
             )
 
 
+def _latency(r: dict[str, Any], code: str, t0: float) -> str:
+    times = [t for t, text in r["service_alerts"] if t >= t0 and text.startswith(f"CMP {code}")]
+    return f"{min(times) - t0:.2f}" if times else "-"
+
+
+def print_plane(results: dict[str, list[dict[str, Any]]], cut_s: float, cruise_s: float) -> None:
+    print(
+        f"PX4 SIH airplane, Hold loiter circle at 40 m, {cruise_s:g} s cruise, "
+        f"{cut_s:g} s GNSS cut (MAV_CMD_INJECT_FAILURE)"
+    )
+    print("horizontal error vs SIH truth, m: mean/p95/max; LOST/BACK: alert latency, s;")
+    print("cover: share of the service's positions within 2.45 x its 1-sigma over the cut")
+    head = (
+        f"{'run':10s} {'PX4 cruise':>15s} {'svc cruise':>15s} {'PX4 cut':>15s} "
+        f"{'svc cut':>15s} {'PX4 2 s after':>15s} {'LOST':>5s} {'BACK':>5s} {'cover':>6s} "
+        f"{'stray alerts':>12s}"
+    )
+    print(head)
+    bad = ("CMP GNSS_STALE", "CMP GNSS_LOST", "CMP GNSS_BACK", "CMP FAULT")
+    for key in ("with", "without"):
+        for k, r in enumerate(results[key]):
+            t_cut, t_back = r["t_cut_s"], r["t_back_s"]
+            stray = [
+                text.split()[1]
+                for t, text in r["service_alerts"]
+                if text.startswith(bad)
+                and not (t_cut <= t <= t_cut + 1.5 and "GNSS_LOST" in text)
+                and not (t_back <= t <= t_back + 1.5 and "GNSS_BACK" in text)
+            ]
+            print(
+                f"{f'{key} {k + 1}':10s} {_mm(r['px4_pre']):>15s} {_mm(r['service_pre']):>15s} "
+                f"{_mm(r['px4_cut']):>15s} {_mm(r['service_cut']):>15s} "
+                f"{_mm(r['px4_after_2s']):>15s} {_latency(r, 'GNSS_LOST', t_cut):>5s} "
+                f"{_latency(r, 'GNSS_BACK', t_back):>5s} {r['service_cover_95_cut']:>6.3f} "
+                f"{','.join(stray) or '-':>12s}"
+            )
+    for key in ("with", "without"):
+        done = [r for r in results[key] if r["px4_cut"].get("n")]
+        if done:
+            mean = statistics.fmean(r["px4_cut"]["mean_m"] for r in done)
+            worst = statistics.fmean(r["px4_cut"]["max_m"] for r in done)
+            print(
+                f"PX4 over the cut, {key} the service's aux position: mean of means "
+                f"{mean:.2f} m, mean of maxima {worst:.2f} m ({len(done)} runs)"
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--runs", type=int, default=2)
     p.add_argument("--cut-s", type=float, default=20.0)
     p.add_argument("--after-s", type=float, default=10.0)
+    p.add_argument("--airframe", type=int, default=10040, choices=(10040, PLANE))
+    p.add_argument("--cruise-s", type=float, default=120.0, help="airplane: cruise before the cut")
     p.add_argument(
         "--engine",
         action="append",
@@ -128,8 +195,13 @@ def main(argv: list[str] | None = None) -> int:
     if reason:
         print(f"bench/sitl_px4.py: {reason}", file=sys.stderr)
         return 2
-    results = run_px4(args.runs, args.cut_s, args.after_s, args.engine)
-    print_px4(results, args.cut_s)
+    results = run_px4(
+        args.runs, args.cut_s, args.after_s, args.engine, args.airframe, args.cruise_s
+    )
+    if args.airframe == PLANE:
+        print_plane(results, args.cut_s, args.cruise_s)
+    else:
+        print_px4(results, args.cut_s)
     if args.json:
         args.json.write_text(json.dumps(results, indent=1, default=str))
     return 0

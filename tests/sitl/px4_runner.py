@@ -11,6 +11,11 @@ HIL_STATE_QUATERNION (UDP 19410); PX4's estimate its GLOBAL_POSITION_INT; the se
 solution and accuracy its GLOBAL_POSITION_INT and GLOBAL_POSITION_SENSOR. All times are
 the autopilot's boot clock: a loaded machine slows the simulation, not the scores.
 
+``--airframe 10041``: the SIH airplane instead. It takes off from the runway (Takeoff
+mode, ``--climb-s`` for the climb to 40 m), then flies Hold, PX4's loiter circle
+(``NAV_LOITER_RAD``, 80 m) at about 9 m/s over the ground, ``--hover-s`` of cruise
+before the cut, which falls in the circle.
+
 ``python -m tests.sitl.px4_runner gnss_cut --fusion 1 --out r.json``
 """
 
@@ -51,6 +56,25 @@ AGP_ID = 1
 FAILURE_UNIT_SENSOR_GPS = 4
 FAILURE_TYPE_OK, FAILURE_TYPE_OFF = 0, 1
 TAKEOFF_ALT_M = 10.0
+AIRFRAME_QUAD, AIRFRAME_PLANE = 10040, 10041
+PLANE_TAKEOFF_ALT_M = 40.0
+PX4_MAIN_AUTO, PX4_AUTO_LOITER = 4, 3
+"""PX4's custom mode: main mode AUTO, sub-mode LOITER (Hold)."""
+PLANE_THRUSTER = {
+    "SIH_F_CT0": 0.131,
+    "SIH_F_CT1": 0.004,
+    "SIH_F_CT2": -0.146,
+    "SIH_F_CP0": 0.0777,
+    "SIH_F_CP1": 0.0498,
+    "SIH_F_CP2": -0.11,
+    "SIH_F_DIA_INCH": 8,
+    "SIH_F_RPM_MAX": 13000,
+    "FW_T_CLMB_MAX": 8,
+}
+"""The SIH airplane's forward thruster as PX4 later set it (PX4 pull request 28362): the
+build here runs 10041 on the 2 N default thrust (``SIH_T_MAX`` no longer read), and with
+it full throttle rolls the plane along the runway at 6 m/s, never flying."""
+"""PX4's custom mode: main mode AUTO, sub-mode LOITER (Hold)."""
 COVER_95_2D = math.sqrt(-2.0 * math.log(0.05))
 """A 1-sigma horizontal accuracy times this (2.45) holds 95 % of a circular 2-D error."""
 
@@ -265,6 +289,18 @@ def px4_biases(workdir: Path, times: list[float]) -> dict[str, list[list[float]]
     return out
 
 
+def write_truth_csv(path: Path, rows: list[tuple[float, ...]]) -> None:
+    """SIH's truth in the columns ``companion evaluate --truth`` reads (autopilot time, s),
+    for replaying the service's recording of the flight against it."""
+    head = "t_s,lat_deg,lon_deg,alt_m,vn_mps,ve_mps,vd_mps,roll_deg,pitch_deg,yaw_deg"
+    lines = [head]
+    lines += [
+        f"{r[0]:.6f},{r[1]:.10f},{r[2]:.10f},{r[3]:.4f}," + ",".join(f"{v:.5f}" for v in r[4:])
+        for r in rows
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
 def summary(errs: list[tuple[float, float]]) -> dict[str, float | int]:
     vals = sorted(e for _, e in errs)
     if not vals:
@@ -300,12 +336,33 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     svc_ids: set[int] = set()
     alerts: list[tuple[float, str]] = []
     truth_alt_m: list[float] = []
+    truth_speed_mps: list[tuple[float, float]] = []
+    px4_modes: list[tuple[float, int]] = []
     partial: dict[int, str] = {}
+    plane = args.airframe == AIRFRAME_PLANE
+
+    truth_rows: list[tuple[float, ...]] = []
 
     def on_truth(msg: Any) -> None:
         if msg.get_type() == "HIL_STATE_QUATERNION":
             truth.add(msg.time_usec * 1e-6, msg.lat * 1e-7, msg.lon * 1e-7)
+            w, x, y, z = msg.attitude_quaternion
+            truth_rows.append(
+                (
+                    msg.time_usec * 1e-6,
+                    msg.lat * 1e-7,
+                    msg.lon * 1e-7,
+                    msg.alt * 1e-3,
+                    msg.vx * 0.01,
+                    msg.vy * 0.01,
+                    msg.vz * 0.01,
+                    math.degrees(math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))),
+                    math.degrees(math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))),
+                    math.degrees(math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))),
+                )
+            )
             truth_alt_m.append(msg.alt * 1e-3)
+            truth_speed_mps.append((msg.time_usec * 1e-6, 0.01 * math.hypot(msg.vx, msg.vy)))
 
     def on_service(msg: Any) -> None:
         kind = msg.get_type()
@@ -332,11 +389,13 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         "SYS_FAILURE_EN": 1,
         "COM_RC_IN_MODE": 4,
         "NAV_DLL_ACT": 0,
-        "MIS_TAKEOFF_ALT": TAKEOFF_ALT_M,
+        "MIS_TAKEOFF_ALT": PLANE_TAKEOFF_ALT_M if plane else TAKEOFF_ALT_M,
     }
+    if plane:
+        params.update(PLANE_THRUSTER)
     truth_tap = Listener(f"udpin:127.0.0.1:{TRUTH_PORT + instance}", on_truth)
     service_tap = Listener(f"udpin:127.0.0.1:{SERVICE_TAP_PORT}", on_service)
-    start_px4(procs, params, instance)
+    start_px4(procs, params, instance, args.airframe)
     master = f"udpin:127.0.0.1:{COMPANION_PORT + instance}"
     sections: dict[str, dict[str, Any]] = {
         "link": {"master": master, "gcs": f"udpout:127.0.0.1:{SERVICE_TAP_PORT}"}
@@ -351,6 +410,10 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         if msg.get_type() == "GLOBAL_POSITION_INT":
             with gcs.lock:
                 px4_est.add(msg.time_boot_ms * 1e-3, msg.lat * 1e-7, msg.lon * 1e-7)
+        elif msg.get_type() == "HEARTBEAT":
+            mode = int(msg.custom_mode)
+            if not px4_modes or px4_modes[-1][1] != mode:
+                px4_modes.append((gcs.ap_time_s, mode))
 
     gcs.on_message.append(on_gcs)
     try:
@@ -359,8 +422,11 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         # EKF2 aligned, GNSS in use, the service publishing: then arm and take off
         gcs.wait_until(lambda: len(svc.t) > 20, 90.0, "the service publishing")
         gcs.arm()
+        t_takeoff = gcs.now()
         gcs.command(MAV.MAV_CMD_NAV_TAKEOFF, -1, 0, 0, math.nan, math.nan, math.nan, math.nan)
         gcs.sleep(args.climb_s)
+        if plane:  # then Hold: a loiter circle (NAV_LOITER_RAD) at the take-off altitude
+            gcs.command(MAV.MAV_CMD_DO_SET_MODE, 1, PX4_MAIN_AUTO, PX4_AUTO_LOITER)
         gcs.sleep(args.hover_s)
         t_cut = gcs.now()
         gcs.command(MAV.MAV_CMD_INJECT_FAILURE, FAILURE_UNIT_SENSOR_GPS, FAILURE_TYPE_OFF)
@@ -375,6 +441,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         truth_tap.close()
         service_tap.close()
     procs.stop("px4")  # its flight log complete
+    write_truth_csv(procs.workdir / "truth.csv", truth_rows)
     flags = px4_flags(procs.workdir)
     biases = px4_biases(procs.workdir, [t_cut, t_back])
     aux = flags.get("cs_aux_gpos", [])
@@ -414,11 +481,18 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         "px4_after": summary(px4_after),
         "px4_back_under_pre_max_s": back_under_s,
         "px4_after_2s": summary(errors(px4_est, truth, t_back, t_back + 2.0)),
+        "service_pre": summary(errors(svc, truth, pre0, t_cut)),
         "service_cut": summary(errors(svc, truth, t_cut, t_back)),
         "service_cover_95": (
             sum(1 for c in covered if c[3]) / len(covered) if covered else math.nan
         ),
         "service_cover_n": len(covered),
+        "service_cover_95_cut": (
+            sum(1 for c in covered if c[3] and t_cut <= c[0] < t_back)
+            / max(1, sum(1 for c in covered if t_cut <= c[0] < t_back))
+        ),
+        "service_cover_n_cut": sum(1 for c in covered if t_cut <= c[0] < t_back),
+        "t_takeoff_s": t_takeoff,
         "service_worst_ratio": max((c[1] / c[2] for c in covered if c[2] > 0), default=math.nan),
         "service_ids": sorted(svc_ids),
         "service_sensor_in_cut": sum(1 for t in svc_eph if t_cut + 1.5 <= t < t_back),
@@ -447,6 +521,8 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
         "px4_statustexts": statustexts[-40:],
         "truth_n": len(truth.t),
         "truth_climb_m": (max(truth_alt_m) - truth_alt_m[0]) if truth_alt_m else math.nan,
+        "truth_speed_mps": [[round(t, 2), round(v, 2)] for t, v in truth_speed_mps[::25]],
+        "px4_modes": px4_modes,
     }
 
 
@@ -462,6 +538,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario", choices=("gnss_cut",))
     ap.add_argument("--fusion", type=int, default=1, help="EKF2_AGP0_CTRL (1 on, 0 off)")
+    ap.add_argument(
+        "--airframe",
+        type=int,
+        default=AIRFRAME_QUAD,
+        choices=(AIRFRAME_QUAD, AIRFRAME_PLANE),
+        help="SIH quadrotor (hover) or airplane (take-off, then Hold: a loiter circle)",
+    )
     ap.add_argument("--climb-s", type=float, default=10.0)
     ap.add_argument("--hover-s", type=float, default=15.0)
     ap.add_argument("--pre-window-s", type=float, default=10.0)

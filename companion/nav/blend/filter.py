@@ -24,6 +24,7 @@ from companion.nav.blend.error_model import (
     carry_pos_vel,
     open_segment_cov,
 )
+from companion.nav.blend.gyro_carry import GyroCarry
 from companion.nav.blend.history import (
     History,
     carry_correction,
@@ -118,6 +119,15 @@ class BlendNavigator:
         """How far the autopilot's attitude strays from its body rates (kept across
         restarts: it is the autopilot's)."""
         self._rate_drift_yaw_corr = math.nan
+        self.gyro_carry = GyroCarry()
+        """The IMU's gyro integrated between attitude samples (:mod:`.gyro_carry`)."""
+        self.imu_drift = RateDrift(cfg.rate_drift_window_s)
+        """As :attr:`rate_drift`, the attitude against the IMU's gyro between samples:
+        the correction the unaided departure carries when the IMU covers the attitude."""
+        self._imu_covers = False
+        """The IMU's gyro carried the attitude's last step (:meth:`GyroCarry.take`)."""
+        self._departure_on_imu = False
+        """The gap's departure is carried by the IMU's gyro (else by the attitude's rates)."""
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -222,6 +232,7 @@ class BlendNavigator:
         accel_noise = self._accel_noise
         if accel_noise is not None and accel_noise.on_imu(sample):
             self._follow_accel_noise(accel_noise.psd_m2ps3)
+        self.gyro_carry.on_imu(sample.t_s, gyro_t)
         if self._held_rates:
             gyro_t = held_rate_at(self._held_rates, sample.t_s)
         mech = self._mech
@@ -385,7 +396,9 @@ class BlendNavigator:
         var = self.rate_drift.bias_variance() or [0.0, 0.0, 0.0]
         floor = self.config.gyro_instability_radps**2
         p[12:15, 12:15] = np.diag([v + floor for v in var])
-        self.departure.start(self.rate_drift.mean_rate())
+        imu_rate = self.imu_drift.mean_rate()
+        self._departure_on_imu = self._imu_covers and imu_rate is not None
+        self.departure.start(imu_rate if self._departure_on_imu else self.rate_drift.mean_rate())
         log.info(
             "GNSS gap: the autopilot's heading modelled unaided (its rates' bias 1-sigma %s deg/s)",
             [round(math.degrees(math.sqrt(v + floor)), 4) for v in var],
@@ -422,16 +435,25 @@ class BlendNavigator:
         self._att_q = euler_to_quat_values(roll, pitch, yaw - yaw_correction_rad)
         self._att_t_s = sample.t_s
         rates = sample.rate_b_radps.tolist()
+        dq_imu = self.gyro_carry.take(sample.t_s)
+        self._imu_covers = dq_imu is not None
+        if self._unaided_on and self._departure_on_imu:
+            # its heading's departure from its rates: a correction of unknown quality
+            self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_increment(
+                sample.t_s, self._att_q, dq_imu
+            )
+        if not self.attitude_held:
+            if yaw_correction_rad != self._rate_drift_yaw_corr:
+                self._rate_drift_yaw_corr = yaw_correction_rad
+                self.rate_drift.restart()
+                self.imu_drift.restart()
+            self.imu_drift.on_increment(sample.t_s, self._att_q, dq_imu)
         if len(rates) == 3 and math.isfinite(sum(rates)):
-            if self._unaided_on:
-                # its heading's departure from its rates: a correction of unknown quality
+            if self._unaided_on and not self._departure_on_imu:
                 self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_sample(
                     sample.t_s, self._att_q, rates
                 )
             if not self.attitude_held:
-                if yaw_correction_rad != self._rate_drift_yaw_corr:
-                    self._rate_drift_yaw_corr = yaw_correction_rad
-                    self.rate_drift.restart()
                 self.rate_drift.on_sample(sample.t_s, self._att_q, rates)
             elif self._strapdown and not self._own_attitude:
                 held = self._held_rates

@@ -62,14 +62,28 @@ class RateDrift:
             self.skipped += 1
             return
         h = 0.5 * dt
-        carried = quat_mul(
-            q0,
-            quat_from_rotvec(
-                (w0[0] + rate_b_radps[0]) * h,
-                (w0[1] + rate_b_radps[1]) * h,
-                (w0[2] + rate_b_radps[2]) * h,
-            ),
+        dq = quat_from_rotvec(
+            (w0[0] + rate_b_radps[0]) * h,
+            (w0[1] + rate_b_radps[1]) * h,
+            (w0[2] + rate_b_radps[2]) * h,
         )
+        self._residual(dt, quat_mul(q0, dq), q_nb)
+
+    def on_increment(self, t_s: float, q_nb: Quat, dq_b: Quat | None) -> None:
+        """One attitude sample ``q_nb`` at ``t_s`` and the rotation ``dq_b`` (body frame)
+        that carries the previous sample to it (the IMU's gyro, :mod:`.gyro_carry`; None:
+        not known, the sample only starts the next step)."""
+        last = self._last
+        self._last = (t_s, q_nb, [])
+        if last is None or dq_b is None:
+            return
+        dt = t_s - last[0]
+        if not 0.0 < dt <= MAX_STEP_S:
+            self.skipped += 1
+            return
+        self._residual(dt, quat_mul(last[1], dq_b), q_nb)
+
+    def _residual(self, dt: float, carried: Quat, q_nb: Quat) -> None:
         r = rotvec_between(carried, q_nb)
         if not math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) <= MAX_RATE_RADPS * dt:
             self.skipped += 1

@@ -1,5 +1,9 @@
 """How far the autopilot's heading departs from its own body rates through a GNSS gap.
 
+The rates are the IMU's gyro where its samples cover the attitude's (:mod:`.gyro_carry`:
+faster than the attitude messages' own rates, which a rolling and yawing vehicle outruns),
+else the attitude messages' rates.
+
 In a gap the autopilot shares (its GNSS is ours), its heading is no longer aided by the
 GNSS velocity: what still moves it besides its body rates (its gyros less its own bias
 estimate) is its remaining aiding (a compass, airspeed), which may pull it toward the
@@ -87,6 +91,32 @@ class UnaidedDeparture:
                 (w0[2] + rate_b_radps[2]) * h + k[2] * dt,
             ),
         )
+        return self._compare(dt, carried, q_nb)
+
+    def on_increment(self, t_s: float, q_nb: Quat, dq_b: Quat | None) -> float:
+        """As :meth:`on_sample`, the attitude carried from the previous sample by the
+        rotation ``dq_b`` (body frame: the IMU's gyro, :mod:`.gyro_carry`) instead of the
+        sample's rates; None (not covered by the IMU) restarts the carry from ``q_nb``."""
+        last = self._last
+        carried = self._carried
+        if last is not None and carried is not None and t_s == last[0]:
+            return 0.0
+        self._last = (t_s, [])
+        if dq_b is None or last is None or carried is None or not 0.0 < t_s - last[0] <= MAX_STEP_S:
+            if carried is not None:
+                self.restarts += 1
+            self._carried = q_nb
+            return 0.0
+        dt = t_s - last[0]
+        k = self._corr
+        carried = quat_mul(
+            quat_mul(carried, dq_b), quat_from_rotvec(k[0] * dt, k[1] * dt, k[2] * dt)
+        )
+        return self._compare(dt, carried, q_nb)
+
+    def _compare(self, dt: float, carried: Quat, q_nb: Quat) -> float:
+        """The carried attitude against the autopilot's: the smoothed departure about down
+        and the growth of its peak."""
         self._carried = carried
         r = rotvec_between(carried, q_nb)  # in the carried body frame
         c = quat_to_mat_values(carried)
