@@ -90,7 +90,9 @@ def print_table(rows: list[dict[str, str]]) -> None:
 
 def walk_table_row() -> dict[str, str]:
     """The walk_0827 recording (bench/walk_0827.py: no ATTITUDE, 15 s outages, the RTK
-    solution as reference) as one row, with the device's measurement floors."""
+    solution as reference) as one row, with the device's measurement floors; its closure
+    judged against the textbook filter run on the same outages in this run (printed
+    beside it)."""
     spec = importlib.util.spec_from_file_location(
         "walk_0827", Path(__file__).with_name("walk_0827.py")
     )

@@ -119,8 +119,11 @@ class LcSettings:
     pos_unc_m: tuple[float, float, float] = (0.05, 0.05, 0.1)  # N, E, D
     accel_bias_unc_mps2: float = 0.2
     gyro_bias_unc_dps: float = 0.2
-    lever_arm_b_m: tuple[float, float, float] = (0.0, -0.05, 0.0)
-    """Antenna relative to the IMU, body FRD (its IMU sits 5 cm right of the antenna)."""
+    lever_arm_b_m: tuple[float, float, float] = (0.0, 0.05, 0.0)
+    """Antenna relative to the IMU, body FRD, m: as its code applies the configuration
+    (IMU offset minus antenna offset, added to the IMU's position). Its configuration says
+    the IMU sits 5 cm right of the antenna, which would be (0, -0.05, 0); the filter's
+    closures on the walk move by several metres between the two (see bench/walk_0827.py)."""
     lever_arm_in_h: bool = False
     """Couple the lever arm into the attitude and gyro-bias columns of H (14.115). Off as
     in rtklibexplorer's code: with a 5 cm arm guessed, not measured, and 1 cm RTK
@@ -130,6 +133,9 @@ class LcSettings:
     """Floors on the receiver's reported position 1-sigma (horizontal, vertical), m: none
     in the textbook configuration (a bench knob to swap in the service's floors)."""
     vel_sd_floor_mps: float = 0.0
+    vertical_velocity: bool = True
+    """Use the receiver's vertical velocity. The textbook does; the service's input on the
+    walk (GPS_RAW_INT: ground speed and course) has none (a bench knob to swap that in)."""
     zupt_samples: int = 50
     zupt_accel_mps2: float = 0.25
     zupt_gyro_dps: float = 0.25
@@ -319,6 +325,12 @@ class LcFilter:
         r[0:3, 0:3] = cen.T @ np.diag(np.square(sd_p)) @ cen
         r[3:6, 3:6] = cen.T @ np.diag(np.square(sd_v)) @ cen
         z = np.concatenate([r_meas - r_ant, v_meas - v_ant])
+        if not s.vertical_velocity:  # the velocity rows in NED, the down one dropped
+            t = np.eye(6)
+            t[3:6, 3:6] = cen
+            z, h, r = t @ z, t @ h, t @ r @ t.T
+            keep = [0, 1, 2, 3, 4]
+            z, h, r = z[keep], h[keep], r[np.ix_(keep, keep)]
         return float(self._update(z, h, r)[0])
 
     def _zupt_check(self, f_b: np.ndarray, w_b: np.ndarray) -> None:
