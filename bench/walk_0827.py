@@ -39,8 +39,9 @@ the textbook filter, hold and constant velocity), the means, and how each outage
 vertical error grew (:func:`vertical_growth`: the part from the
 vertical velocity at the outage's start and the part from an acceleration error).
 
-Run: ``python bench/walk_0827.py [--sliding]`` (skips with a stated reason without the
-data).
+``--swaps`` runs the textbook filter with one ingredient swapped at a time
+(:data:`TEXTBOOK_SWAPS`). Run: ``python bench/walk_0827.py [--sliding] [--swaps]`` (skips
+with a stated reason without the data).
 """
 
 from __future__ import annotations
@@ -650,6 +651,41 @@ def print_sliding(rows: list[dict[str, Any]]) -> None:
     )
 
 
+TEXTBOOK_SWAPS: dict[str, dict[str, Any]] = {
+    "as configured by its source": {},
+    "velocity process noise / 19 (the service's MEMS preset)": {
+        "noise_factors": (4.0, 4.0 / 19.0, 4.0, 4.0)
+    },
+    "the service's handheld floors (0.1 m, 0.2 m, 0.1 m/s)": {
+        "pos_sd_floor_m": (0.1, 0.2),
+        "vel_sd_floor_mps": 0.1,
+    },
+    "no vertical velocity (as GPS_RAW_INT)": {"vertical_velocity": False},
+    "lever arm as its configuration describes it": {"lever_arm_b_m": (0.0, -0.05, 0.0)},
+}
+"""One ingredient of the textbook filter swapped at a time (``--swaps``)."""
+
+
+def print_textbook_swaps(walk: Walk) -> None:
+    """The textbook filter's mean closures (source schedule; 14 shifted outages) with each
+    of :data:`TEXTBOOK_SWAPS`: which of its ingredients its figures depend on."""
+    print("textbook filter, one ingredient swapped: mean closure H / V m")
+    print(f"{'':58s}{'2 outages':>14s}{'14 outages':>14s}")
+    for name, change in TEXTBOOK_SWAPS.items():
+        settings = LcSettings(**change)
+        src = textbook_closures(walk, outages(walk), settings)
+        slid = [
+            c
+            for st in SLIDING_STARTS_S
+            for c in textbook_closures(walk, outages(walk, st), settings)
+        ]
+        cells = [
+            f"{np.mean([c[1][0] for c in cs]):6.2f} /{np.mean([c[1][1] for c in cs]):5.2f}"
+            for cs in (src, slid)
+        ]
+        print(f"{name:58s}{cells[0]:>14s}{cells[1]:>14s}")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -658,11 +694,21 @@ def main() -> int:
         help="also replay the schedule shifted by 5 s steps over its 45 s period "
         "(14 outages) and print every closure and the means",
     )
+    parser.add_argument(
+        "--swaps",
+        action="store_true",
+        help="also run the textbook filter with one ingredient swapped at a time "
+        "(its velocity process noise, the service's floors, no vertical velocity, "
+        "its lever arm's sign) on the source's and the shifted schedules",
+    )
     args = parser.parse_args()
     row = walk_row()
     if row is None:
         print(f"skipped: no recording at {DATA_DIR} (the real data is not in this checkout)")
         return 0
+    if args.swaps:
+        print_textbook_swaps(load_walk())
+        print()
     if args.sliding:
         print_sliding(sliding_rows())
         print()
