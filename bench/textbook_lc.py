@@ -349,7 +349,12 @@ class LcFilter:
             self._still = 0
 
     def zupt(self, mean_gyro_b_rps: np.ndarray) -> None:
-        """Zero velocity and zero angular rate (w.r.t. the Earth) at rest (Groves 15.4)."""
+        """Zero velocity and zero angular rate (w.r.t. the Earth) at rest (Groves ch. 15,
+        zero updates), in the sign convention of the GNSS update (rtklibexplorer's code
+        also ties the velocity row to the accelerometer bias and subtracts the bias
+        correction; not followed). Its thresholds (0.25 deg/s on the corrected rate's norm
+        for 50 samples in a row) fire on the walk only in the rest after it (from 117 s):
+        before its biases are estimated the resting gyro reads ~0.23 deg/s plus noise."""
         s = self.settings
         h = np.zeros((6, 15))
         h[0:3, 3:6] = -np.eye(3)
