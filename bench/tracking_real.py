@@ -42,6 +42,7 @@ from companion.nav.rotations import euler_to_mat_nb  # noqa: E402
 from companion.nav.tracking import (  # noqa: E402
     MODELS,
     Tracker,
+    TrackerConfig,
     acceleration_ned,
     pointing_error_rad,
 )
@@ -109,9 +110,12 @@ def _nearest(t: np.ndarray, at: float) -> int:
     return j if t[j] - at < at - t[j - 1] else j - 1
 
 
-def run(s: Streams, model: str, step: int, min_speed: float) -> dict[str, float]:
-    """Every ``step``-th position is telemetry, the others are scored."""
-    trk = Tracker(model)  # type: ignore[arg-type]
+def run(
+    s: Streams, model: str, step: int, min_speed: float, cfg: TrackerConfig | None = None
+) -> dict[str, float]:
+    """Every ``step``-th position is telemetry, the others are scored (``cfg``: the filter's
+    configuration, default :class:`TrackerConfig`)."""
+    trk = Tracker(model, cfg)  # type: ignore[arg-type]
     errs, cover, loss = [], [], []
     t0 = float(s.t_pos[0])
     was_lost = False
