@@ -390,15 +390,14 @@ def main(argv: list[str] | None = None) -> int:
         help="skip the process-noise search (the models at their defaults only)",
     )
     ap.add_argument(
-        "--imu-per-position",
-        type=int,
-        default=1,
-        help="ATTITUDE and IMU samples per position (a link carrying them faster)",
+        "--imu-hz",
+        type=float,
+        default=0.0,
+        help="ATTITUDE and IMU rate, Hz, if faster than the positions (default: theirs)",
     )
     args = ap.parse_args(argv)
     rates = [float(r) for r in args.rates.split(",")]
     seeds = range(args.seed0, args.seed0 + args.seeds)
-    imu = max(args.imu_per_position, 1)
     flights = _flights()
     if args.ablate:
         ablate(flights, rates, seeds)
@@ -409,8 +408,8 @@ def main(argv: list[str] | None = None) -> int:
             f"telemetry {tel.name}: pointing error, deg (RMS over seeds {seeds.start}.."
             f"{seeds.stop - 1}; loss: worst seed's max through a {LOSS_S:.0f} s loss + "
             f"{AFTER_LOSS_S:.0f} s); range RMS in manoeuvres, m; NEES and NIS of the position "
-            "(3 expected); model* = its best process noise for this case (σ_m/τ; CV: q); "
-            f"{imu} ATTITUDE and IMU sample(s) per position"
+            "(3 expected); model* = its best process noise for this case (σ_m/τ; CV: q)"
+            + (f"; ATTITUDE and IMU at {args.imu_hz:g} Hz" if args.imu_hz else "")
         )
         print(
             f"{'flight':<9}{'Hz':>4} {'model':<15}{'manoeuvre':>10}{'straight':>9}{'range':>8}"
@@ -419,6 +418,7 @@ def main(argv: list[str] | None = None) -> int:
         ratios: dict[str, list[float]] = {}
         for fl in flights:
             for rate in rates:
+                imu = max(round(args.imu_hz / rate), 1)
                 runs: dict[str, tuple[str, Telemetry, TrackerConfig]] = {
                     m: (m, tel, tracker_config(tel)) for m in MODELS
                 }
