@@ -52,6 +52,15 @@ point at), predicting from the last sample heard. Figures:
 
 Ratios are Singer / dynamic in the same run. Seeded (``--seed0``).
 
+A fair baseline: each model is also run at its best process noise for each case
+(``model*``), found by the same search for Singer and the dynamic channel (σ_m in
+1, 2, 3, 5 m/s² by τ in 3, 10, 30 s; constant velocity: its PSD in 0.3-30 m²/s³),
+scored by the RMS in manoeuvres (``--no-search``: the defaults only). ``z2 exact``
+is the dynamic channel, at its best tuning, with exact attitude and IMU (and told
+so): what the positions and the motion model leave, the bound of the ratio.
+``--imu-hz F``: ATTITUDE and IMU at F Hz, faster than the positions (a link that
+carries them; the samples between two positions are used too).
+
 ``--ablate``: where the realistic profile's error comes from. The realistic
 telemetry with one impairment removed at a time (the filters told the changed
 noise model), dynamic and Singer: RMS in manoeuvres, their ratio and the worst

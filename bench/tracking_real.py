@@ -22,6 +22,10 @@ been given, from a station placed 150 m from the flight's middle, on the ground:
 
 ``<=3σ`` is the share of scored positions within 3 times the filter's own
 pointing σ; ``NIS`` the positions' mean normalised innovation square (3 expected).
+``dynamic+IMU``: the dynamic channel given every ATTITUDE/IMU sample of the log
+(10 Hz) with the decimated positions (a link that carries them faster);
+``model*``: each model at its best process noise for the rate, by the search of
+``bench/tracking.py`` (``--no-search``: the defaults only).
 """
 
 from __future__ import annotations
