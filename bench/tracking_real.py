@@ -22,6 +22,10 @@ been given, from a station placed 150 m from the flight's middle, on the ground:
 
 ``<=3σ`` is the share of scored positions within 3 times the filter's own
 pointing σ; ``NIS`` the positions' mean normalised innovation square (3 expected).
+``dynamic+IMU``: the dynamic channel given every ATTITUDE/IMU sample of the log
+(10 Hz) with the decimated positions (a link that carries them faster);
+``model*``: each model at its best process noise for the rate, by the search of
+``bench/tracking.py`` (``--no-search``: the defaults only).
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from companion.nav.rotations import euler_to_mat_nb  # noqa: E402
 from companion.nav.tracking import (  # noqa: E402
     MODELS,
     Tracker,
+    TrackerConfig,
     acceleration_ned,
     pointing_error_rad,
 )
@@ -109,16 +114,43 @@ def _nearest(t: np.ndarray, at: float) -> int:
     return j if t[j] - at < at - t[j - 1] else j - 1
 
 
-def run(s: Streams, model: str, step: int, min_speed: float) -> dict[str, float]:
-    """Every ``step``-th position is telemetry, the others are scored."""
-    trk = Tracker(model)  # type: ignore[arg-type]
+def _dynamics(trk: Tracker, s: Streams, t: float, ji: int) -> None:
+    """One IMU sample with the nearest ATTITUDE (within 0.2 s) as z2."""
+    ja = _nearest(s.t_att, t)
+    if abs(s.t_att[ja] - t) < 0.2 and trk.started:
+        mat = euler_to_mat_nb(*(float(x) for x in s.euler_rad[ja]))
+        trk.acceleration(t, acceleration_ned(mat, s.f_b_mps2[ji], G_MPS2), mat)
+
+
+def run(
+    s: Streams,
+    model: str,
+    step: int,
+    min_speed: float,
+    cfg: TrackerConfig | None = None,
+    all_imu: bool = False,
+) -> dict[str, float]:
+    """Every ``step``-th position is telemetry, the others are scored (``cfg``: the filter's
+    configuration, default :class:`TrackerConfig`; ``all_imu``: every IMU sample of the log
+    is telemetry, paired with the nearest ATTITUDE, not only those beside a position)."""
+    trk = Tracker(model, cfg)  # type: ignore[arg-type]
+    i_imu = 0  # the next IMU sample not yet given (all_imu)
     errs, cover, loss = [], [], []
     t0 = float(s.t_pos[0])
     was_lost = False
+
+    def lost(t: float) -> bool:
+        return ((t - t0) % LOSS_EVERY_S) < LOSS_S and t - t0 > LOSS_EVERY_S / 2
+
     for k, t in enumerate(s.t_pos):
         t = float(t)
         rel = s.pos_ned_m[k]
-        if ((t - t0) % LOSS_EVERY_S) < LOSS_S and t - t0 > LOSS_EVERY_S / 2:
+        # all_imu: the IMU samples heard before this position's time (none in a loss)
+        while all_imu and i_imu < len(s.t_imu) and s.t_imu[i_imu] < t:
+            if not lost(float(s.t_imu[i_imu])):
+                _dynamics(trk, s, float(s.t_imu[i_imu]), i_imu)
+            i_imu += 1
+        if lost(t):
             was_lost = True
             continue
         moving = s.speed_mps[k] > min_speed and float(np.linalg.norm(rel)) > 50.0
@@ -132,6 +164,9 @@ def run(s: Streams, model: str, step: int, min_speed: float) -> dict[str, float]
                 cover.append(e <= 3.0 * est.pointing_sigma_rad)
         was_lost = False
         if k % step != 0:
+            continue
+        if all_imu:
+            trk.position(t, rel)
             continue
         trk.position(t, rel)
         ja, ji = _nearest(s.t_att, t), _nearest(s.t_imu, t)
@@ -149,16 +184,38 @@ def run(s: Streams, model: str, step: int, min_speed: float) -> dict[str, float]
     }
 
 
+SEARCH = {
+    "singer": [(sm, tau) for sm in (1.0, 2.0, 3.0, 5.0) for tau in (3.0, 10.0, 30.0)],
+    "dynamic": [(sm, tau) for sm in (1.0, 2.0, 3.0, 5.0) for tau in (3.0, 10.0, 30.0)],
+    "cv": [(q, 0.0) for q in (0.3, 1.0, 3.0, 10.0, 30.0)],
+}
+"""The process-noise search of ``bench/tracking.py``: σ_m/τ for Singer and the dynamic
+channel, the white acceleration's PSD for constant velocity."""
+
+
+def _config(model: str, point: tuple[float, float]) -> TrackerConfig:
+    if model == "cv":
+        return TrackerConfig(cv_acc_psd=point[0])
+    return TrackerConfig(singer_sigma_mps2=point[0], singer_tau_s=point[1])
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.parse_args(argv)
+    ap.add_argument(
+        "--no-search", action="store_true", help="skip the process-noise search (defaults only)"
+    )
+    args = ap.parse_args(argv)
     cases = [("real_plane_erle_2014-12-04", [(1, 10), (2, 5), (5, 2)], 8.0)]
     if not FLIGHTS.is_dir():
         print(f"skipped: {FLIGHTS} is absent (the real logs are not part of the project)")
         return 0
-    print("pointing error of predicted positions, deg (the autopilot's own positions as reference)")
     print(
-        f"{'flight':<34}{'Hz':>4} {'model':<8}{'RMS':>7}{'p95':>7}{'loss':>7}{'<=3σ':>7}"
+        "pointing error of predicted positions, deg (the autopilot's own positions as "
+        "reference); +IMU: every ATTITUDE/IMU sample of the log (10 Hz), not only those beside "
+        "a position; model*: its best process noise for this rate (σ_m/τ; CV: q)"
+    )
+    print(
+        f"{'flight':<34}{'Hz':>4} {'model':<15}{'RMS':>7}{'p95':>7}{'loss':>7}{'<=3σ':>7}"
         f"{'NIS':>6}{'n':>6}"
     )
     for name, rates, min_speed in cases:
@@ -169,16 +226,31 @@ def main(argv: list[str] | None = None) -> int:
         s = load(path)
         for rate, step in rates:
             rows = {m: run(s, m, step, min_speed) for m in MODELS}
+            rows["dynamic+IMU"] = run(s, "dynamic", step, min_speed, all_imu=True)
+            if not args.no_search:
+                for m in MODELS:
+                    scored = [(run(s, m, step, min_speed, _config(m, pt)), pt) for pt in SEARCH[m]]
+                    r, pt = min(scored, key=lambda x: x[0]["rms"])
+                    label = f"{pt[0]:g}" if m == "cv" else f"{pt[0]:g}/{pt[1]:g}"
+                    rows[f"{m}* {label}"] = r
             for m, r in rows.items():
                 hz = f"{rate:g}"
                 print(
-                    f"{name:<34}{hz:>4} {m:<8}{r['rms']:>7.2f}{r['p95']:>7.2f}{r['loss']:>7.2f}"
+                    f"{name:<34}{hz:>4} {m:<15}{r['rms']:>7.2f}{r['p95']:>7.2f}{r['loss']:>7.2f}"
                     f"{r['cover']:>7.1%}{r['nis']:>6.2f}{r['n']:>6.0f}"
                 )
-            print(
-                f"{'':<39}Singer/dynamic RMS {rows['singer']['rms'] / rows['dynamic']['rms']:.2f}x,"
-                f" CV/dynamic {rows['cv']['rms'] / rows['dynamic']['rms']:.2f}x"
+            rms = {m.split(" ")[0]: r["rms"] for m, r in rows.items()}
+            line = (
+                f"{'':<39}Singer/dynamic RMS {rms['singer'] / rms['dynamic']:.2f}x,"
+                f" CV/dynamic {rms['cv'] / rms['dynamic']:.2f}x,"
+                f" Singer/dynamic+IMU {rms['singer'] / rms['dynamic+IMU']:.2f}x"
             )
+            if not args.no_search:
+                line += (
+                    f", Singer*/dynamic {rms['singer*'] / rms['dynamic']:.2f}x,"
+                    f" Singer*/dynamic* {rms['singer*'] / rms['dynamic*']:.2f}x"
+                )
+            print(line)
     return 0
 
 

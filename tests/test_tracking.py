@@ -214,6 +214,29 @@ def test_dynamic_channel_reaches_the_known_input_filter(rate_hz, margin):
     assert np.all(sigma < margin * bound), (sigma, bound)
 
 
+def test_dynamic_channel_uses_the_imu_samples_between_positions():
+    """A link that carries ATTITUDE and the IMU faster than the positions (10 per position
+    at 1 Hz): every sample is an update, so the velocity change between two positions is
+    known to z2's noise /√10 and the position σ falls below the one-sample known-input
+    filter's, within 1.25× of the ten-sample one's."""
+    one, ten = Tracker("dynamic", WHITE_2M), Tracker("dynamic", WHITE_2M)
+    t = 0.0
+    for k in range(300):
+        t = float(k)
+        for trk, n in ((one, 1), (ten, 10)):
+            assert trk.position(t, np.array([1000.0 + 40.0 * t, 500.0, -300.0]))
+            for m in range(n):
+                assert trk.acceleration(t + m / n, np.zeros(3), np.eye(3))
+    floor = WHITE_2M.acc_sigma_floor_mps2
+    bound_1 = _known_input_sigma_m(1.0, WHITE_2M.pos_sigma_m, floor)
+    bound_10 = _known_input_sigma_m(1.0, WHITE_2M.pos_sigma_m, floor / math.sqrt(10.0))
+    sig_1 = np.sqrt(np.diag(one.kf.P[0:3, 0:3]))
+    sig_10 = np.sqrt(np.diag(ten.kf.P[0:3, 0:3]))
+    assert np.all(sig_10 < bound_1) and np.all(sig_1 > bound_1), (sig_1, sig_10, bound_1)
+    assert np.all(sig_10 >= bound_10) and np.all(sig_10 < 1.25 * bound_10), (sig_10, bound_10)
+    assert ten.accelerations == 10 * ten.positions
+
+
 def test_dynamic_channel_is_consistent_and_learns_its_observation_noise(turn_path):
     """A body-frame accelerometer bias is estimated through the turn, z2's noise is
     learnt from its innovations, and the filter's NIS and NEES are those of a
