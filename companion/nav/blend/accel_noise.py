@@ -126,9 +126,7 @@ class IncrementNoise:
                 self._prev_t = t_s
                 self._acc.append(acc)
             return
-        if math.isfinite(self._prev_dt) and abs(dt - self._prev_dt) > 0.25 * max(
-            dt, self._prev_dt
-        ):
+        if math.isfinite(self._prev_dt) and abs(dt - self._prev_dt) > 0.25 * max(dt, self._prev_dt):
             self._restart()  # irregular: a dropout or jitter; the chain starts again
             self._prev_t = t_s
             self._acc.append(acc)
@@ -138,9 +136,9 @@ class IncrementNoise:
         a.append(acc)
         if len(a) == 3:
             a0, a1, a2 = a
-            self.sample_psd_sum += dt * sum(
-                (a2[i] - 2.0 * a1[i] + a0[i]) ** 2 for i in range(3)
-            ) / 6.0
+            self.sample_psd_sum += (
+                dt * sum((a2[i] - 2.0 * a1[i] + a0[i]) ** 2 for i in range(3)) / 6.0
+            )
             self.samples += 3
         if self._m == 0:
             self._m = max(1, round(self.block_s / dt))
