@@ -29,7 +29,8 @@ differences (by up to 16/6 of its variance) and integrates to nothing (PX4's 250
 HIGHRES_IMU on the simulated multirotor: 3e-4 m^2/s^3 by the samples, 4e-5 integrated
 over 0.2-4 s). So the same second differences are also taken of the velocity increments
 over :data:`BLOCK_S` (overlapping, every sample; ``var = 6 q tau`` for white noise of PSD
-``q`` over increments of ``tau``: the Hadamard variance, IEEE Std 952-1997 annex C), and
+``q`` over increments of ``tau``: the Hadamard variance, Riley, Handbook of frequency stability analysis, NIST SP 1065,
+2008), and
 over the last ``hold_s`` seconds the upper ``1 - BOUND_PROB`` confidence bound of that
 low-frequency PSD, when below the samples' PSD, scales the windows' PSDs down by its
 ratio to it. The increments also hold the vehicle's own manoeuvres (a walker's gait), so
