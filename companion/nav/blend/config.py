@@ -46,11 +46,11 @@ class BlendConfig:
     (docs/methods.md, "Gyro noise measured in use")."""
     accel_noise_measured: bool = True
     """When the accelerometer's measured white noise (second differences of its readings
-    over windows of 50 samples, capped by what its 0.1 s velocity steps show) exceeds ``accel_vrw_mps_rts`` beyond chance, that measured
-    density is the accelerometer noise of the velocity error (the floor of the adaptive
-    one): an airframe's vibration, aliased into the IMU stream, is integrated by the INS
-    as velocity error a datasheet density does not hold (docs/methods.md, "Accelerometer
-    noise measured in use")."""
+    over windows of 50 samples, capped by what its 0.1 s velocity steps show) exceeds
+    ``accel_vrw_mps_rts`` beyond chance, that measured density is the accelerometer noise
+    of the velocity error (the floor of the adaptive one): an airframe's vibration, aliased
+    into the IMU stream, is integrated by the INS as velocity error a datasheet density
+    does not hold (docs/methods.md, "Accelerometer noise measured in use")."""
     gyro_bias_sigma_radps: float = ranged(5.0 * _DEG / _HOUR_S, gt=0.0)
     """Gyro bias 1-sigma, rad/s."""
     gyro_bias_tau_s: float = ranged(3600.0, gt=0.0, finite=False)
