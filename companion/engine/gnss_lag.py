@@ -96,6 +96,9 @@ class LagTracker:
         self._offset_start_s = None
 
     def on_attitude(self, s: AttitudeSample) -> None:
+        prev = self._att_prev
+        if prev is not None and s.t_s == prev[0]:
+            return  # the same attitude again (ATTITUDE and ATTITUDE_QUATERNION)
         q = euler_to_quat_values(s.roll_rad, s.pitch_rad, s.yaw_rad)
         self._rotate_pending(s.t_s, q)
         self._att_prev = (s.t_s, q)
@@ -204,8 +207,10 @@ def combine(windows: list[tuple[float, float]]) -> MeasuredLag:
 
 def _nlerp(q0: Quat, q1: Quat, w: float) -> Quat:
     """Normalised linear interpolation from ``q0`` (w = 0) to ``q1`` (w = 1), the shorter way."""
-    if q0[0] * q1[0] + q0[1] * q1[1] + q0[2] * q1[2] + q0[3] * q1[3] < 0.0:
-        q1 = (-q1[0], -q1[1], -q1[2], -q1[3])
-    q = tuple(a + w * (b - a) for a, b in zip(q0, q1, strict=True))
-    n = math.sqrt(sum(c * c for c in q))
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+    a0, a1, a2, a3 = q0
+    b0, b1, b2, b3 = q1
+    if a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 < 0.0:
+        b0, b1, b2, b3 = -b0, -b1, -b2, -b3
+    c0, c1, c2, c3 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2), a3 + w * (b3 - a3)
+    n = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3)
+    return (c0 / n, c1 / n, c2 / n, c3 / n)

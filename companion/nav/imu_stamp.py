@@ -87,7 +87,7 @@ class ImuStampEstimator:
         """An attitude (body to NED) at its stamp; out-of-order dropped."""
         if self._att and t_s <= self._att[-1][0]:
             return
-        if not all(math.isfinite(c) for c in q_nb):
+        if not math.isfinite(q_nb[0] + q_nb[1] + q_nb[2] + q_nb[3]):
             return
         self._att.append((t_s, q_nb))
         while self._att and self._att[0][0] < t_s - self.config.window_s:
