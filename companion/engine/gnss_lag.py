@@ -41,7 +41,7 @@ class MeasuredLag:
 
 @dataclass(frozen=True, slots=True)
 class LagTrackerConfig:
-    window_s: float = 30.0
+    window_s: float = 20.0
     min_windows: int = 3
     max_sigma_s: float = 0.02
     min_change_s: float = 0.01
