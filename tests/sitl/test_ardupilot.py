@@ -107,7 +107,7 @@ def test_plane_healthy_cruise_p95(plane_flight: dict[str, Any]) -> None:
     """GPS1_DELAY_MS 100 overstates the lag of the stamps this SITL sends by 17 ms
     (``SITL_GPS_LAG_MS``), and EKF3, which uses it, runs 20 ms (0.46 m) ahead. The
     service measures the lag in flight (against the attitude's clock: the IMU's stamps
-    are 11.5 ms late) and places the fixes with it from about 100 s after take-off,
+    are 11.5 ms late) and places the fixes with it from about 70 s after take-off,
     where it disagrees with the parameter."""
     svc, ap = plane_flight["healthy"]["service"], plane_flight["healthy"]["autopilot"]
     assert svc["p95_m"] <= ap["p95_m"], (svc, ap)
