@@ -372,7 +372,7 @@ class Pipeline:
                 )
         for receiver in (0, 1):
             delay_s = ap.gps_delay_s(receiver)
-            if delay_s is None:
+            if delay_s is None or (receiver == 0 and self._measured_lag_s is not None):
                 delay_s = self._default_delay_s(receiver)
             if delay_s != gnss.delay_s[receiver]:
                 gnss.delay_s[receiver] = delay_s
@@ -400,29 +400,20 @@ class Pipeline:
         return []
 
     def _default_delay_s(self, receiver: int) -> float:
-        """A receiver's lag where the autopilot's parameter gives none: the configured one,
-        else (receiver 0) the one measured in flight, else 0."""
+        """A receiver's lag where the autopilot's parameter gives none (or receiver 0's was
+        measured): the configured one, else (receiver 0) the one measured in flight, else 0."""
         configured = self.config.decoder.gnss_delay_s
         if configured > 0.0 or receiver != 0 or self._measured_lag_s is None:
             return configured
         return self._measured_lag_s
 
     def _on_measured_lag(self, m: MeasuredLag, t_s: float) -> list[bytes]:
-        """Receiver 0's lag measured: taken where nothing else gives it; a disagreeing
-        autopilot parameter is announced, a configured lag only logged."""
+        """Receiver 0's lag measured: the fixes placed with it unless the configuration
+        gives a lag (then only logged). The autopilot's parameter is what its own filter
+        assumes, not a measurement of the stamps it sends: where it disagrees, the
+        measurement is used and the disagreement announced."""
         gnss = self.decoder.gnss
-        ap_s = self.autopilot_params.gps_delay_s(0)
         said = f"{m.lag_s * 1000.0:.0f}+/-{m.sigma_s * 1000.0:.0f} ms"
-        if ap_s is not None:
-            alert = Alert(
-                t_s,
-                AlertCode.AP_CONFIG,
-                Severity.WARNING,
-                f"GPS1_DELAY_MS {ap_s * 1000.0:.0f}, lag {said}",  # one STATUSTEXT
-            )
-            log.warning("CMP %s %s", alert.code.value, alert.text)
-            self.encoder.allow_next(alert.code)
-            return self._encode(alert)
         if self.config.decoder.gnss_delay_s > 0.0:
             log.warning(
                 "GNSS receiver 0: configured lag %.3f s, measured %s: the configured one kept",
@@ -434,8 +425,23 @@ class Pipeline:
         gnss.delay_s[0] = m.lag_s
         assert self.lag is not None
         self.lag.restart(m.lag_s)
-        log.warning("GNSS receiver 0: lag measured %s: fixes placed with it", said)
-        return []
+        log.warning(
+            "GNSS receiver 0: lag measured %s (IMU stamps %.0f ms late): fixes placed with it",
+            said,
+            m.imu_offset_s * 1000.0,
+        )
+        ap_s = self.autopilot_params.gps_delay_s(0)
+        if ap_s is None:
+            return []
+        alert = Alert(
+            t_s,
+            AlertCode.AP_CONFIG,
+            Severity.WARNING,
+            f"GPS1_DELAY_MS {ap_s * 1000.0:.0f}, lag {said}",  # one STATUSTEXT
+        )
+        log.warning("CMP %s %s", alert.code.value, alert.text)
+        self.encoder.allow_next(alert.code)
+        return self._encode(alert)
 
     def bad_frames(self, count: int) -> None:
         """The byte parser dropped ``count`` corrupt frames: count them as rejections."""

@@ -1,14 +1,19 @@
-"""Receiver 0's lag measured in flight: taken where nothing else says it, told where the
-autopilot's parameter disagrees.
+"""Receiver 0's lag measured in flight: taken where the configuration does not give it,
+and over the autopilot's parameter where that disagrees.
 
 Each ``window_s`` of fixes gives one estimate (:mod:`companion.nav.gnss_lag`) of the
 whole lag (the one in use plus the residual); the windows do not overlap and are
 combined by their inverse variances, the sigma widened by the windows' own scatter where
 it exceeds their sigmas (Birge's ratio). Once the combination has ``min_windows`` windows
 and a sigma under ``max_sigma_s``, and differs from the lag in use by more than
-``max(3 sigma, min_change_s)``, :meth:`LagTracker.take` hands it out once: the pipeline
-places the fixes with it when the lag is not the autopilot's parameter (0 there means
-the driver's default, unknown) or announces the disagreement when it is.
+``max(k_sigma sigma, min_change_s)``, :meth:`LagTracker.take` hands it out once: the pipeline
+places the fixes with it (announcing it where the autopilot's parameter says otherwise).
+
+The estimator measures the lag against the IMU's stamps; those may be late themselves
+(filtered readings, stamped when sent). Their offset against the attitude stream is
+measured alongside (:mod:`companion.nav.imu_stamp`, windows of their own combined the
+same way) and added: the lag handed out is against the attitude's clock, which the
+service's outputs carry.
 
 Pure: samples in, a decision out.
 """
@@ -16,9 +21,11 @@ Pure: samples in, a decision out.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 from companion.nav.gnss_lag import GnssLagEstimator, LagConfig
+from companion.nav.imu_stamp import ImuStampEstimator, StampOffsetConfig
 from companion.nav.rotations import Quat, euler_to_quat_values, quat_rotate
 from companion.types import AttitudeSample, GnssFix, ImuSample
 
@@ -28,33 +35,54 @@ class MeasuredLag:
     lag_s: float
     sigma_s: float
     windows: int
+    imu_offset_s: float = 0.0
+    """The IMU stamps' offset included in ``lag_s`` (0: not measured)."""
 
 
 @dataclass(frozen=True, slots=True)
 class LagTrackerConfig:
-    window_s: float = 60.0
+    window_s: float = 20.0
     min_windows: int = 3
     max_sigma_s: float = 0.02
-    min_change_s: float = 0.02
+    min_change_s: float = 0.01
+    k_sigma: float = 2.0
+    """The measurement replaces the lag in use when they differ by more than this many
+    sigmas: choosing between two values, the measurement's expected squared error is
+    sigma^2, the other's (difference^2 - sigma^2), smaller only below sqrt(2) sigma."""
     max_lag_s: float = 0.5
+    offset_window_s: float = 30.0
+    """The IMU stamp offset's windows."""
+    max_offset_sigma_s: float = 0.005
+    """The offset is added once its combination is surer than this."""
 
 
 class LagTracker:
     """Feeds the estimator (receiver 0's fixes, the first IMU's specific force rotated by
-    the newest attitude) and combines its windows."""
+    the attitude at its time) and combines its windows."""
+
+    MAX_PENDING = 50
 
     def __init__(self, config: LagTrackerConfig | None = None) -> None:
         self.config = config or LagTrackerConfig()
         self.estimator = GnssLagEstimator(LagConfig(window_s=self.config.window_s))
         self.lag_in_use_s = 0.0
         self._q_nb: Quat | None = None
+        self._att_prev: tuple[float, Quat] | None = None
+        self._pending: deque[tuple[float, float, float, float]] = deque()
+        """Specific forces (stamp, body x, y, z) waiting for the attitude after them."""
         self._imu_id: int | None = None
         self._window_start_s: float | None = None
         self._windows: list[tuple[float, float]] = []
         """(whole lag, sigma) of each window that gave an estimate, s."""
         self._handed: MeasuredLag | None = None
         self.last: MeasuredLag | None = None
-        """The combination so far (None before a window gave an estimate)."""
+        """The combination so far, against the IMU's stamps (None before a window gave an
+        estimate)."""
+        self.stamps = ImuStampEstimator(StampOffsetConfig(window_s=self.config.offset_window_s))
+        self._offset_start_s: float | None = None
+        self._offset_windows: list[tuple[float, float]] = []
+        self.imu_offset: MeasuredLag | None = None
+        """The IMU stamps' offset against the attitude's so far (combined windows)."""
 
     def restart(self, lag_in_use_s: float) -> None:
         """The stamps' lag changed (or the autopilot rebooted): the window starts over; the
@@ -62,18 +90,64 @@ class LagTracker:
         self.lag_in_use_s = lag_in_use_s
         self.estimator.reset()
         self._window_start_s = None
+        self._pending.clear()
+        self._att_prev = None
+        self.stamps.reset()
+        self._offset_start_s = None
 
     def on_attitude(self, s: AttitudeSample) -> None:
-        self._q_nb = euler_to_quat_values(s.roll_rad, s.pitch_rad, s.yaw_rad)
+        prev = self._att_prev
+        if prev is not None and s.t_s == prev[0]:
+            return  # the same attitude again (ATTITUDE and ATTITUDE_QUATERNION)
+        q = euler_to_quat_values(s.roll_rad, s.pitch_rad, s.yaw_rad)
+        self._rotate_pending(s.t_s, q)
+        self._att_prev = (s.t_s, q)
+        self._q_nb = q
+        self.stamps.add_attitude(s.t_s, q)
+        if self._offset_start_s is None or s.t_s < self._offset_start_s:
+            self._offset_start_s = s.t_s
+        elif s.t_s - self._offset_start_s >= self.config.offset_window_s:
+            est = self.stamps.estimate()
+            self.stamps.reset()
+            self._offset_start_s = s.t_s
+            if est is not None:
+                self._offset_windows.append((est.offset_s, est.sigma_s))
+                self.imu_offset = combine(self._offset_windows)
 
     def on_imu(self, s: ImuSample) -> None:
         if self._imu_id is None:
             self._imu_id = s.imu_id
-        if s.imu_id != self._imu_id or self._q_nb is None:
+        if s.imu_id != self._imu_id:
+            return
+        self.stamps.add_gyro(s.t_s, s.gyro_b_radps)
+        if self._q_nb is None:
             return
         f = s.acc_b_mps2
-        n, e, _ = quat_rotate(self._q_nb, float(f[0]), float(f[1]), float(f[2]))
-        self.estimator.add_acceleration(s.t_s, (n, e))  # type: ignore[arg-type]
+        self._pending.append((s.t_s, float(f[0]), float(f[1]), float(f[2])))
+        if len(self._pending) > self.MAX_PENDING:  # no attitude comes: the oldest with the newest
+            t, fx, fy, fz = self._pending.popleft()
+            n, e, _ = quat_rotate(self._q_nb, fx, fy, fz)
+            self.estimator.add_acceleration(t, (n, e))  # type: ignore[arg-type]
+
+    def _rotate_pending(self, t_att_s: float, q: Quat) -> None:
+        """The specific forces measured up to ``t_att_s`` rotated by the attitude at the
+        time they measure (their stamp less the IMU's offset, when known), interpolated
+        between the previous attitude and ``q``: the newest attitude alone, up to an
+        attitude period old, would lag the acceleration in turns by half that period."""
+        off = self.imu_offset
+        late_s = (
+            off.lag_s if off is not None and off.sigma_s <= self.config.max_offset_sigma_s else 0.0
+        )
+        prev = self._att_prev
+        while self._pending and self._pending[0][0] - late_s <= t_att_s:
+            t, fx, fy, fz = self._pending.popleft()
+            t_true = t - late_s
+            if prev is None or t_true <= prev[0] or t_att_s <= prev[0]:
+                q_t = q if prev is None or t_true > prev[0] else prev[1]
+            else:
+                q_t = _nlerp(prev[1], q, (t_true - prev[0]) / (t_att_s - prev[0]))
+            n, e, _ = quat_rotate(q_t, fx, fy, fz)
+            self.estimator.add_acceleration(t, (n, e))  # type: ignore[arg-type]
 
     def on_fix(self, s: GnssFix) -> None:
         if s.receiver_id != 0 or s.vel_ne_mps is None or s.fix_type < 3:
@@ -92,14 +166,24 @@ class LagTracker:
         self._windows.append((self.lag_in_use_s + est.lag_s, est.sigma_s))
         self.last = combine(self._windows)
 
+    def measured(self) -> MeasuredLag | None:
+        """The combined lag against the attitude's clock: the IMU stamps' offset added
+        once it is sure (before that, against the IMU's own stamps)."""
+        m, off = self.last, self.imu_offset
+        if m is None or off is None or off.sigma_s > self.config.max_offset_sigma_s:
+            return m
+        return MeasuredLag(
+            m.lag_s + off.lag_s, math.hypot(m.sigma_s, off.sigma_s), m.windows, off.lag_s
+        )
+
     def take(self) -> MeasuredLag | None:
         """The measured lag, once, when it is sure and differs from the one in use."""
-        cfg, m = self.config, self.last
+        cfg, m = self.config, self.measured()
         if m is None or m.windows < cfg.min_windows or m.sigma_s > cfg.max_sigma_s:
             return None
         if not 0.0 <= m.lag_s <= cfg.max_lag_s:
             return None
-        if abs(m.lag_s - self.lag_in_use_s) <= max(3.0 * m.sigma_s, cfg.min_change_s):
+        if abs(m.lag_s - self.lag_in_use_s) <= max(cfg.k_sigma * m.sigma_s, cfg.min_change_s):
             return None
         if self._handed is not None and abs(m.lag_s - self._handed.lag_s) <= cfg.min_change_s:
             return None
@@ -119,3 +203,14 @@ def combine(windows: list[tuple[float, float]]) -> MeasuredLag:
         chi2 = sum(wi * (x - mean) ** 2 for wi, (x, _) in zip(w, windows, strict=True))
         sigma *= max(1.0, math.sqrt(chi2 / (len(windows) - 1)))
     return MeasuredLag(mean, sigma, len(windows))
+
+
+def _nlerp(q0: Quat, q1: Quat, w: float) -> Quat:
+    """Normalised linear interpolation from ``q0`` (w = 0) to ``q1`` (w = 1), the shorter way."""
+    a0, a1, a2, a3 = q0
+    b0, b1, b2, b3 = q1
+    if a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 < 0.0:
+        b0, b1, b2, b3 = -b0, -b1, -b2, -b3
+    c0, c1, c2, c3 = a0 + w * (b0 - a0), a1 + w * (b1 - a1), a2 + w * (b2 - a2), a3 + w * (b3 - a3)
+    n = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3)
+    return (c0 / n, c1 / n, c2 / n, c3 / n)

@@ -15,7 +15,10 @@ difference over +-50 ms of lag: accelerations averaged over 0.1 s), so
 fixes' correlated noise, and never below the scatter of the window's blocks. The lag is
 observable only while the acceleration changes: a straight, steady flight gives a large
 sigma and no estimate. Fixes are differenced about a second apart (``baseline_s``): the
-velocity change grows with the interval, a fix's noise does not.
+velocity change grows with the interval, a fix's noise does not. Every fix is paired
+with the first one a baseline after it (a single chain would use one fix in baseline x
+rate); the pairs overlap, so Fisher's information is divided by the pairs per disjoint
+baseline.
 
 Pure: samples in, an estimate out; no clock.
 """
@@ -113,12 +116,16 @@ class GnssLagEstimator:
         # cumulative integral of the acceleration (trapezoid), interpolated at any time
         seg = 0.5 * (acc[1:, 1:] + acc[:-1, 1:]) * np.diff(t_a)[:, None]
         cum = np.vstack([np.zeros((1, 2)), np.cumsum(seg, axis=0)])
-        fix = fix[_spaced(fix[:, 0], cfg.baseline_s)]
-        t_f = fix[:, 0]
-        dt_f = np.diff(t_f)
+        # every fix paired with the first one at least a baseline after it: all fixes are
+        # used (a single chain would keep one in baseline x rate), the pairs overlap
+        t_all = fix[:, 0]
+        later = np.searchsorted(t_all, t_all + cfg.baseline_s - 1e-6)
+        ok = later < t_all.size
+        i0, i1 = np.nonzero(ok)[0], later[ok]
+        dt_f = fix[i1, 0] - fix[i0, 0]
         keep = dt_f <= cfg.max_fix_interval_s
-        t0, t1, dt = t_f[:-1][keep], t_f[1:][keep], dt_f[keep]
-        dv = np.diff(fix[:, 1:], axis=0)[keep]
+        t0, t1, dt = fix[i0, 0][keep], fix[i1, 0][keep], dt_f[keep]
+        dv = (fix[i1, 1:] - fix[i0, 1:])[keep]
         lags = np.arange(cfg.min_lag_s, cfg.max_lag_s + 0.5 * cfg.step_s, cfg.step_s)
         # every interval must lie inside the IMU's span at every lag tried
         inside = (t0 - lags[-1] >= t_a[0]) & (t1 - lags[0] <= t_a[-1])
@@ -158,7 +165,10 @@ class GnssLagEstimator:
         excitation = float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1))))
         i = int(np.argmin(cost))
         var_r = float(cost[i]) / max(2 * (n - len(blocks)), 1)
-        info = float(np.sum(jerk * jerk)) / (2.0 * var_r) if var_r > 0.0 else math.inf
+        # overlapping pairs share fixes and accelerations: the information of as many
+        # independent pairs as disjoint baselines fit in the window
+        overlap = max(1.0, n * cfg.baseline_s / max(float(t1[-1] - t0[0]), cfg.baseline_s))
+        info = float(np.sum(jerk * jerk)) / (2.0 * var_r * overlap) if var_r > 0.0 else math.inf
         if on_edge or excitation < cfg.min_excitation_mps2 or not info > 0.0:
             return None
         sigma = max(
@@ -183,12 +193,3 @@ def _minimum(lags: FloatArray, cost: FloatArray) -> tuple[float, bool]:
         if curv > 0.0:
             lag += 0.5 * float(lags[1] - lags[0]) * float(c_m - c_p) / float(curv)
     return lag, i in (0, lags.size - 1)
-
-
-def _spaced(t_s: FloatArray, baseline_s: float) -> FloatArray:
-    """Indices of a chain of times at least ``baseline_s`` apart, from the first."""
-    keep = [0]
-    for i in range(1, t_s.size):
-        if t_s[i] - t_s[keep[-1]] >= baseline_s - 1e-6:
-            keep.append(i)
-    return np.array(keep, dtype=int)

@@ -129,7 +129,11 @@ def test_measured_gps_lag_taken_where_the_autopilot_gives_none() -> None:
     assert [round(f.t_s, 6) for f in fixes] == [9.88]
 
 
-def test_measured_gps_lag_against_the_autopilot_parameter_is_announced() -> None:
+def test_measured_gps_lag_against_the_autopilot_parameter_used_and_announced() -> None:
+    """GPS1_DELAY_MS is what the autopilot's filter assumes, not a measurement of the
+    stamps it sends (ArduPilot SITL's 100 ms against 83 ms measured): a sure
+    measurement places the fixes, says so, and stays through a new reading of the
+    parameters."""
     from companion.engine.gnss_lag import MeasuredLag
 
     p, _ = _started()
@@ -137,7 +141,20 @@ def test_measured_gps_lag_against_the_autopilot_parameter_is_announced() -> None
     out = _msgs(p._on_measured_lag(MeasuredLag(0.083, 0.006, 4), 10.0))  # noqa: SLF001
     texts = [m.text for m in out if m.get_type() == "STATUSTEXT"]
     assert texts == ["CMP AP_CONFIG GPS1_DELAY_MS 100, lag 83+/-6 ms"]
-    assert p.decoder.gnss.delay_s[0] == pytest.approx(0.1)  # the autopilot's kept
+    assert p.decoder.gnss.delay_s[0] == pytest.approx(0.083)
+    p.on_message(_param("GPS1_DELAY_MS", 100.0), 0.3)
+    fixes = p.decoder.decode(AP.parsed(gps_raw(10_100_000)), 0.4)
+    assert [round(f.t_s, 6) for f in fixes] == [10.017]
+
+
+def test_configured_gps_lag_kept_over_the_measured_one() -> None:
+    from companion.engine.gnss_lag import MeasuredLag
+    from companion.mavlink.decode.config import DecoderConfig
+
+    p, _ = _started(Config(decoder=DecoderConfig(gnss_delay_s=0.2)))
+    p.on_message(_param("GPS1_DELAY_MS", 100.0), 0.1)
+    assert p._on_measured_lag(MeasuredLag(0.083, 0.006, 4), 10.0) == []  # noqa: SLF001
+    assert p.decoder.gnss.delay_s[0] == pytest.approx(0.1)
 
 
 def test_gps_id_from_autopilot_turned_off_live() -> None:
