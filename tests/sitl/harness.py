@@ -415,16 +415,16 @@ class GroundStation:
         raise TimeoutError(f"parameter {name} not read")
 
     def set_mode(self, custom_mode: int) -> None:
-        self.wait_until(
-            lambda: (
-                self.command(mavutil.mavlink.MAV_CMD_DO_SET_MODE, 1, custom_mode) == 0
-                or self.mode() == custom_mode
-            ),
-            30.0,
-            f"mode {custom_mode}",
-            poll_s=0.5,
-        )
-        self.wait_until(lambda: self.mode() == custom_mode, 10.0, f"mode {custom_mode} shown")
+        """Asked again until the heartbeat shows it: an accepted change can be undone just
+        after boot (a copter's GUIDED, ACKed, was not shown 10 s later once in a loaded run)."""
+
+        def shown() -> bool:
+            if self.mode() == custom_mode:
+                return True
+            self.command(mavutil.mavlink.MAV_CMD_DO_SET_MODE, 1, custom_mode)
+            return False
+
+        self.wait_until(shown, 60.0, f"mode {custom_mode} shown", poll_s=2.0)
 
     def mode(self) -> int | None:
         hb = self.heartbeat
