@@ -88,6 +88,13 @@ class EngineConfig:
     agree (:func:`companion.nav.potential.combine_with_ins`). Better than either alone on
     simulated RTK-fixed approaches and cruises, worse than the INS alone on a MEMS flight
     with a minute of turns (``python bench/potential.py`` measures both): off by default."""
+    vertical_prior: bool = True
+    """Through gaps, publish the height's change since the gap's start as the INS's (or
+    the constant-velocity bridge's) combined with no change, whose variance is the spread
+    of the vehicle's height changes over the gap's length in the last minute of fused
+    fixes, while the two agree; after the first disagreement the INS alone to the gap's
+    end (:mod:`companion.nav.vertical_prior`). Without a barometer nothing else bounds the
+    INS's vertical drift (``python bench/walk_0827.py`` measures it)."""
     inertial_reference: bool = False
     """With the blend, keep free-inertial solutions coasting from staggered anchors
     (:mod:`companion.integrity.coast`, the ``[coast]`` block) as the integrity monitor's

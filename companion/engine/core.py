@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from companion.engine.bridge import PotentialBridge
+from companion.engine.bridge import GAP_MODES, PotentialBridge
 from companion.engine.bridge_choice import BridgeEvidence, inertial_accel_sigma_mps2
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
@@ -71,6 +71,7 @@ from companion.nav.imu_innovations import ImuInnovationCheck, ImuInnovationConfi
 from companion.nav.navigator import AnchoredState, GnssMeasurement, GnssUpdate, NavState
 from companion.nav.outage import OUTAGE_MODES, OutageConfig, OutageMonitor
 from companion.nav.potential import PotentialConfig
+from companion.nav.vertical_prior import VerticalPrior
 from companion.types import (
     Alert,
     AlertCode,
@@ -314,6 +315,8 @@ class Engine:
         """The GNSS outage monitor: usable fixes, the mode (NORMAL, BRIDGING ...)."""
         self.integrity.reset()
         self.bridge = PotentialBridge(cfg, self._potential_config)
+        self.vertical_prior = VerticalPrior()
+        """The last fixes' height as a prediction through a gap, beside the INS's."""
         self.publisher = Publisher(cfg.status_rate_hz, self.outage, self.integrity, self.bridge)
         self.coast: InertialCoast | None = None
         """The free-inertial references (with the blend, once the frame exists)."""
@@ -799,6 +802,7 @@ class Engine:
             self.publisher.last_fused_fix = fix
             self.publisher.satellites = fix.satellites or 0
             self.bridge.add_fix(meas)
+            self._vertical_prior_add(meas)
         elif update.reason != "gate":
             self.stats.gnss[update.reason] += 1
         # after a gap the navigator's prediction, not the receiver, is what is uncertain: a
@@ -872,6 +876,8 @@ class Engine:
         self.navigators.reinitialise(meas)
         self.bridge.restart()
         self.bridge.add_fix(meas)
+        self.vertical_prior.restart()
+        self._vertical_prior_add(meas)
         self.outage.used(fix)
         self._rejected_beyond_bound.discard(fix.receiver_id)
         self.stats.gnss["reinitialised"] += 1
@@ -987,11 +993,40 @@ class Engine:
             navs.sync_fallback()
             fallback_state = navs.fallback.predict(t_s)
             if fallback_state is not None:
+                if self.config.vertical_prior and mode in GAP_MODES:
+                    return self._vertical_prior_carry(fallback_state)
                 return fallback_state
         state = navigator.predict(t_s)
         if state is None:
             return None
-        return self.bridge.carry(state, t_s, mode, navigator is navs.fallback)
+        no_imu = navigator is navs.fallback
+        state = self.bridge.carry(state, t_s, mode, no_imu)
+        if self.config.vertical_prior and not no_imu and mode in GAP_MODES:
+            state = self._vertical_prior_carry(state)
+        return state
+
+    def _vertical_prior_add(self, meas: GnssMeasurement) -> None:
+        if self.config.vertical_prior:
+            self.vertical_prior.add_fix(
+                meas.t_s, float(meas.pos_ned_m[2]), float(meas.pos_var_ned_m2[2])
+            )
+
+    def _vertical_prior_carry(self, state: NavState) -> NavState:
+        """The height combined with the recent fixes' (:mod:`companion.nav.vertical_prior`)."""
+        cov = state.pos_cov_ned_m2
+        both = self.vertical_prior.combine(state.t_s, float(state.pos_ned_m[2]), float(cov[2, 2]))
+        if both is None:
+            return state
+        pos_d_m, var_m2 = both
+        pos = state.pos_ned_m.copy()
+        pos[2] = pos_d_m
+        # the horizontal is the INS's; its correlation with the height is scaled with it
+        k = math.sqrt(var_m2 / cov[2, 2])
+        new_cov = cov.copy()
+        new_cov[2, :2] *= k
+        new_cov[:2, 2] *= k
+        new_cov[2, 2] = var_m2
+        return dataclasses.replace(state, pos_ned_m=pos, pos_cov_ned_m2=new_cov)
 
     def _publish_on_fix(self, now_s: float) -> list[Output]:
         """A publication at ``now_s`` (``publish_on_fix``) and when the next one is due if
@@ -1118,6 +1153,7 @@ class Engine:
             offset = new.lla_to_ned(self.frame.lat0_rad, self.frame.lon0_rad, self.frame.alt0_m)
             self.coast.shift_frame(rotation_between_frames(self.frame, new), offset)
         self.bridge.restart()  # its window of fixes is in the old frame
+        self.vertical_prior.restart()
         self.frame = new
         self.stats.reanchors += 1
         log.info("local frame re-anchored at %.6f, %.6f", math.degrees(lat), math.degrees(lon))
