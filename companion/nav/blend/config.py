@@ -46,7 +46,8 @@ class BlendConfig:
     (docs/methods.md, "Gyro noise measured in use")."""
     accel_noise_measured: bool = True
     """When the accelerometer's measured white noise (second differences of its readings
-    over windows of 50 samples, capped by what its 0.1 s velocity steps show) exceeds ``accel_vrw_mps_rts`` beyond chance, that measured
+    over windows of 50 samples, capped by what its 0.1 s velocity steps show) exceeds
+    ``accel_vrw_mps_rts`` beyond chance, that measured
     density is the accelerometer noise of the velocity error (the floor of the adaptive
     one): an airframe's vibration, aliased into the IMU stream, is integrated by the INS
     as velocity error a datasheet density does not hold (docs/methods.md, "Accelerometer
