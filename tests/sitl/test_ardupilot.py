@@ -297,7 +297,7 @@ def test_copter_gps_outage_accuracy_covers_the_error(
     the body rates carry the attitude from the gap's start, which falls in the corner's
     turn; the attitude they carried settled 0.3 deg off per axis along that rotation,
     where the claim was 0.07 deg: 0 to 73 of 300 outside in five flights. With the hold
-    claiming it (``held_rates_lag_s``) none, in three of those replayed and two flown
+    claiming it (``held_rates_lag_s``) none, in three of those replayed and three flown
     (docs/sitl.md)."""
     outage = request.getfixturevalue(flight)["outage"]
     _assert_covered(outage)
