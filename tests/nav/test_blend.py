@@ -586,3 +586,57 @@ def test_held_attitude_bridges_on_the_rates_with_an_honest_covariance() -> None:
     assert held_err < 1.0
     assert held_nees < chi2.ppf(0.999, 3)
     assert taken_err > 20.0 * held_err
+
+
+@pytest.mark.parametrize("rate_b_radps", [(0.2, -0.1, 0.3), (0.0, 0.0, 0.0)])
+def test_a_hold_begun_in_a_rotation_claims_the_attitude_error_it_leaves(
+    rate_b_radps: tuple[float, float, float],
+) -> None:
+    """The body rates taking over the attitude while the vehicle rotates at w leave an
+    attitude error along that rotation (``held_rates_lag_s`` times w): the hold adds that
+    1-sigma about w's axis, in navigation axes, and nothing when it starts at rest."""
+    spec = SimSpec(duration_s=20.0)
+    sim = simulate(spec, 5)
+    lag_s = 0.03
+
+    def held_attitude_cov(lag: float) -> tuple[np.ndarray, np.ndarray]:
+        nav = BlendNavigator(
+            config_for(spec, mode="attitude_aided", adaptive=False, held_rates_lag_s=lag), FRAME
+        )
+        last: AttitudeSample | None = None
+        for s in sim.samples:
+            if isinstance(s, AttitudeSample):
+                nav.on_attitude(s, 0.0)
+                last = s
+            elif isinstance(s, ImuSample):
+                nav.on_imu(s)
+            else:
+                nav.on_gnss(s)
+        assert last is not None and nav.initialised
+        # the autopilot's last attitude sample, reporting the rotation under way
+        nav.on_attitude(
+            AttitudeSample(
+                last.t_s,
+                last.t_rx_s,
+                last.roll_rad,
+                last.pitch_rad,
+                last.yaw_rad,
+                np.array(rate_b_radps),
+            ),
+            0.0,
+        )
+        nav.hold_attitude(True)
+        return nav.covariance[6:9, 6:9], nav.attitude_q_nb
+
+    without, _ = held_attitude_cov(0.0)
+    with_lag, q_nb = held_attitude_cov(lag_s)
+    w, x, y, z = q_nb
+    c_nb = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    w_n = c_nb @ np.array(rate_b_radps)
+    np.testing.assert_allclose(with_lag - without, lag_s**2 * np.outer(w_n, w_n), atol=1e-12)

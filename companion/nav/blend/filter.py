@@ -154,6 +154,8 @@ class BlendNavigator:
         """While held: the autopilot's two latest body rates ``(t_s, rad/s)``, integrated
         instead of the IMU's gyros."""
         self._bg_before_hold: list[float] | None = None
+        self._last_rates_b: list[float] | None = None
+        """The autopilot's latest body rates, rad/s (the rotation a hold starts in)."""
         self.attitude_unaided_flag = False
         """A GNSS gap the autopilot shares: its attitude is modelled as unaided
         (:meth:`attitude_unaided`)."""
@@ -336,10 +338,20 @@ class BlendNavigator:
             var = self.rate_drift.bias_variance() or [0.0, 0.0, 0.0]
             floor = self.config.gyro_instability_radps**2
             p[12:15, 12:15] = np.diag([v + floor for v in var])
+            # the rotation under way when the rates take over leaves an attitude error
+            # along it (held_rates_lag_s)
+            w = self._last_rates_b
+            lag_s = self.config.held_rates_lag_s
+            if not abs(mech.t_s - self._att_t_s) <= self._max_imu_gap_s:
+                w = None  # no recent attitude: its rotation now is unknown
+            if w is not None and lag_s > 0.0:
+                w_n = quat_to_mat(mech.q_nb) @ np.array(w)
+                p[6:9, 6:9] += lag_s**2 * np.outer(w_n, w_n)
             log.info(
                 "autopilot attitude held out: its body rates carry ours (their bias 1-sigma "
-                "%s deg/s)",
+                "%s deg/s; started turning at %s deg/s)",
                 [round(math.degrees(math.sqrt(v + floor)), 4) for v in var],
+                None if w is None else round(math.degrees(math.sqrt(sum(c * c for c in w))), 1),
             )
         else:
             self._held_rates = []
@@ -449,6 +461,7 @@ class BlendNavigator:
                 self.imu_drift.restart()
             self.imu_drift.on_increment(sample.t_s, self._att_q, dq_imu)
         if len(rates) == 3 and math.isfinite(sum(rates)):
+            self._last_rates_b = rates
             if self._unaided_on and not self._departure_on_imu:
                 self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_sample(
                     sample.t_s, self._att_q, rates
