@@ -393,6 +393,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     }
     if plane:
         params.update(PLANE_THRUSTER)
+    params.update(dict(args.px4_param))
     truth_tap = Listener(f"udpin:127.0.0.1:{TRUTH_PORT + instance}", on_truth)
     service_tap = Listener(f"udpin:127.0.0.1:{SERVICE_TAP_PORT}", on_service)
     start_px4(procs, params, instance, args.airframe)
@@ -402,6 +403,8 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     }
     if args.engine:
         sections["engine"] = dict(args.engine)
+    if args.encoder:
+        sections["encoder"] = dict(args.encoder)
     harness.start_companion(procs, sections)
     gcs = GroundStation(PX4_GCS_URL)
     gcs.target_system = instance + 1  # PX4's MAV_SYS_ID is its instance + 1
@@ -534,6 +537,16 @@ def _key_value(text: str) -> tuple[str, float | str]:
         return key, value
 
 
+def _key_number(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"NAME=VALUE expected, got {text!r}")
+    try:
+        return key, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{key}: {value!r} is not a number") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario", choices=("gnss_cut",))
@@ -557,6 +570,22 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         metavar="KEY=VALUE",
         help="an [engine] setting of the service (a number or a word), repeatable",
+    )
+    ap.add_argument(
+        "--encoder",
+        action="append",
+        type=_key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="an [encoder] setting of the service (a number or a word), repeatable",
+    )
+    ap.add_argument(
+        "--px4-param",
+        action="append",
+        type=_key_number,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PX4 parameter set at boot (e.g. EKF2_AGP0_DELAY=100), repeatable",
     )
     ap.add_argument("--keep", type=Path, default=None, help="run in this folder, keep it")
     ap.add_argument("--out", type=Path, required=True)
