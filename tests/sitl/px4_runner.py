@@ -2,7 +2,7 @@
 (``tests.sitl.harness.run_scenario`` does that); writes its result as JSON.
 
 Scenario ``gnss_cut``: the SIH quadrotor (airframe 10040) with aux global position fusion
-set up (``EKF2_AGP0_ID``, ``EKF2_AGP0_CTRL``), the service on the onboard link
+set up (``EKF2_AGP0_ID``, ``EKF2_AGP0_CTRL``, ``EKF2_AGP0_DELAY``), the service on the onboard link
 (``udpin:127.0.0.1:14540``), takes off, hovers ``--hover-s``, loses GNSS
 (MAV_CMD_INJECT_FAILURE, GPS off, ``SYS_FAILURE_EN = 1``) for ``--cut-s``, gets it back and
 hovers ``--after-s`` more. ``--fusion 0`` leaves ``EKF2_AGP0_CTRL = 0``: the same flight
@@ -53,6 +53,10 @@ MAX_INSTANCES = 10
 SERVICE_TAP_PORT = harness.SERVICE_TAP_PORT
 AGP_ID = 1
 """The id the PX4 set-up gives the service's aux global position (``EKF2_AGP0_ID``)."""
+AGP_DELAY_MS = 150
+"""``EKF2_AGP0_DELAY``: EKF2's fusion horizon on SIH (152 ms with ``EKF2_DELAY_MAX`` =
+200), so that PX4 compares the aux position with its own of the same time
+(docs/mavlink.md, PX4 aux global position)."""
 FAILURE_UNIT_SENSOR_GPS = 4
 FAILURE_TYPE_OK, FAILURE_TYPE_OFF = 0, 1
 TAKEOFF_ALT_M = 10.0
@@ -386,6 +390,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     params = {
         "EKF2_AGP0_ID": AGP_ID,
         "EKF2_AGP0_CTRL": 1 if args.fusion else 0,
+        "EKF2_AGP0_DELAY": AGP_DELAY_MS,
         "SYS_FAILURE_EN": 1,
         "COM_RC_IN_MODE": 4,
         "NAV_DLL_ACT": 0,

@@ -58,13 +58,11 @@ class EncoderConfig:
     be a deliberate choice."""
     px4_agp_lead_s: float = ranged(0.0, ge=0.0, le=0.2)
     """GLOBAL_POSITION_SENSOR (PX4): the position is carried forward by the solution's
-    velocity this long and stamped that much later, s. PX4's EKF2 compares an aux global
-    position with its *output* (current-time) position at the moment it takes the sample
-    from its buffer, not with its delayed state, so a position valid at the solution's
-    time pulls PX4 behind by the speed times (the time it is taken - the solution's
-    time). With ``EKF2_AGP0_DELAY`` = EKF2's fusion horizon, PX4 takes it at its stamp or
-    on arrival, whichever is later: a lead at least the time from the solution to its
-    arrival at PX4 makes the two the same (docs/mavlink.md, PX4 aux global position)."""
+    velocity this long (and stamped that much later), s. PX4 stamps an aux global
+    position on arrival and, with ``EKF2_AGP0_DELAY`` = EKF2's fusion horizon, compares
+    it with its newest position then: set this to the time from the solution to its
+    arrival at PX4 (the link's lag) when that is not small; more puts PX4 ahead
+    (docs/mavlink.md, PX4 aux global position)."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
     """Least time between two STATUSTEXTs of the same alert code, s (a change of state
     within a family, e.g. GNSS_BACK then GNSS_LOST, is always sent)."""
