@@ -390,6 +390,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("BLD_ACC_MEASURED", "blend.accel_noise_measured"),
     ("BLD_VEL_ERR_MEAS", "blend.vel_error_measured"),
     ("ENG_GAP_FEED_ROT", "engine.gap_feed_no_airspeed_max_h_acc_m"),
+    ("ENC_AGP_LEAD", "encoder.px4_agp_lead_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

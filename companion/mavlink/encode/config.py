@@ -56,7 +56,7 @@ class EncoderConfig:
     """Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
     autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
     be a deliberate choice."""
-    px4_agp_lead_s: float = ranged(0.0, ge=0.0, le=0.2)
+    px4_agp_lead_s: float = ranged(0.0, ge=0.0, le=0.5)
     """GLOBAL_POSITION_SENSOR (PX4): the position is carried forward by the solution's
     velocity this long (and stamped that much later), s. PX4 stamps an aux global
     position on arrival and, with ``EKF2_AGP0_DELAY`` = EKF2's fusion horizon, compares
