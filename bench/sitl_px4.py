@@ -66,6 +66,7 @@ def run_px4(
     engine: list[str] | None = None,
     airframe: int = 10040,
     cruise_s: float = 120.0,
+    extra: list[str] | None = None,
 ) -> dict[str, list[dict[str, Any]]]:
     """``runs`` flights with the fusion on and as many with it off (alternating)."""
     results: dict[str, list[dict[str, Any]]] = {"with": [], "without": []}
@@ -86,6 +87,7 @@ def run_px4(
                     args += ["--hover-s", f"{cruise_s:g}", "--pre-window-s", f"{cruise_s:g}"]
                 for setting in engine or []:
                     args += ["--engine", setting]
+                args += extra or []
                 out = Path(tmp) / f"px4_{key}_{k}.json"
                 timeout_s = 300.0 + 3.0 * cut_s + (2.0 * cruise_s if airframe == PLANE else 0.0)
                 result = run_scenario(RUNNER, args, out, timeout_s=timeout_s)
@@ -189,14 +191,30 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="an [engine] setting of the service, e.g. gap_feed_max_h_acc_m=1.5",
     )
+    p.add_argument(
+        "--encoder",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="an [encoder] setting of the service, e.g. px4_agp_lead_s=0",
+    )
+    p.add_argument(
+        "--px4-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PX4 parameter at boot, e.g. EKF2_AGP0_DELAY=0 (both runs of a pair)",
+    )
     p.add_argument("--json", type=Path, help="also write the runner's results here")
     args = p.parse_args(argv)
     reason = missing("px4/run-sih.sh", "px4/bin/px4")
     if reason:
         print(f"bench/sitl_px4.py: {reason}", file=sys.stderr)
         return 2
+    extra = [a for kv in args.encoder for a in ("--encoder", kv)]
+    extra += [a for kv in args.px4_param for a in ("--px4-param", kv)]
     results = run_px4(
-        args.runs, args.cut_s, args.after_s, args.engine, args.airframe, args.cruise_s
+        args.runs, args.cut_s, args.after_s, args.engine, args.airframe, args.cruise_s, extra
     )
     if args.airframe == PLANE:
         print_plane(results, args.cut_s, args.cruise_s)

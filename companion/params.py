@@ -392,6 +392,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("ENG_GAP_FEED_ROT", "engine.gap_feed_no_airspeed_max_h_acc_m"),
     ("ENG_VERT_PRIOR", "engine.vertical_prior"),
     ("BLD_HELD_LAG", "blend.held_rates_lag_s"),
+    ("ENC_AGP_LEAD", "encoder.px4_agp_lead_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

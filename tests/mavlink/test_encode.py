@@ -121,6 +121,23 @@ def test_solution_for_px4_is_global_position_sensor() -> None:
     assert bad.flags == 1  # unhealthy
 
 
+def test_px4_position_carried_forward_by_the_lead() -> None:
+    # 12.34 m/s north, -5.67 m/s east for 50 ms: 0.617 m north, 0.2835 m west, stamped
+    # 50 ms later; GPS_INPUT / GLOBAL_POSITION_INT keep the solution's own time and place
+    enc = Encoder(system_id=3, config=EncoderConfig(px4_agp_lead_s=0.05))
+    gpi, gps = roundtrip(enc, enc.encode(solution(), AutopilotFlavour.PX4))
+    assert gps.time_usec == 123506000 and gpi.time_boot_ms == 123456
+    assert gpi.lat == 473977420 and gpi.lon == -85455940
+    lat0, lon0 = 47.3977420 * DEG, -8.5455940 * DEG
+    north_m = (gps.lat * 1e-7 * DEG - lat0) * 6367000.0  # meridian radius near 47 deg N
+    east_m = (gps.lon * 1e-7 * DEG - lon0) * 6389000.0 * math.cos(lat0)  # prime vertical
+    assert north_m == pytest.approx(12.34 * 0.05, abs=0.02)
+    assert east_m == pytest.approx(-5.67 * 0.05, abs=0.02)
+    # ArduPilot's GPS_INPUT is untouched by it
+    gpi2, gin = roundtrip(enc, enc.encode(solution(), AutopilotFlavour.ARDUPILOT))
+    assert gin.time_usec == 123456000 and gin.lat == 473977420
+
+
 def test_output_choice() -> None:
     assert len(Encoder().encode(solution(), AutopilotFlavour.UNKNOWN)) == 1
     forced = Encoder(EncoderConfig(output="gps_input")).encode(solution(), AutopilotFlavour.PX4)
@@ -278,6 +295,8 @@ def test_gps_input_yaw_is_off_by_default() -> None:
         ({"output": "bogus"}, r"output must be one of \['auto', 'gps_input'"),
         ({"gps_id": 256}, r"gps_id must be in \[0, 255\], got 256"),
         ({"uere_m": math.inf}, r"uere_m must be > 0, got inf"),
+        ({"px4_agp_lead_s": -0.01}, r"px4_agp_lead_s must be in \[0, 0.5\], got -0.01"),
+        ({"px4_agp_lead_s": 0.6}, r"px4_agp_lead_s must be in \[0, 0.5\], got 0.6"),
         ({"min_h_acc_m": 0.0}, r"min_h_acc_m must be > 0, got 0.0"),
         ({"statustext_min_interval_s": -1.0}, r"statustext_min_interval_s must be >= 0"),
         ({"statustext_interval_overrides": (("NOPE", 1.0),)}, r"unknown alert code 'NOPE'"),

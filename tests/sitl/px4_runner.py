@@ -2,7 +2,7 @@
 (``tests.sitl.harness.run_scenario`` does that); writes its result as JSON.
 
 Scenario ``gnss_cut``: the SIH quadrotor (airframe 10040) with aux global position fusion
-set up (``EKF2_AGP0_ID``, ``EKF2_AGP0_CTRL``), the service on the onboard link
+set up (``EKF2_AGP0_ID``, ``EKF2_AGP0_CTRL``, ``EKF2_AGP0_DELAY``), the service on the onboard link
 (``udpin:127.0.0.1:14540``), takes off, hovers ``--hover-s``, loses GNSS
 (MAV_CMD_INJECT_FAILURE, GPS off, ``SYS_FAILURE_EN = 1``) for ``--cut-s``, gets it back and
 hovers ``--after-s`` more. ``--fusion 0`` leaves ``EKF2_AGP0_CTRL = 0``: the same flight
@@ -53,6 +53,10 @@ MAX_INSTANCES = 10
 SERVICE_TAP_PORT = harness.SERVICE_TAP_PORT
 AGP_ID = 1
 """The id the PX4 set-up gives the service's aux global position (``EKF2_AGP0_ID``)."""
+AGP_DELAY_MS = 150
+"""``EKF2_AGP0_DELAY``: EKF2's fusion horizon on SIH (152 ms with ``EKF2_DELAY_MAX`` =
+200), so that PX4 compares the aux position with its own of the same time
+(docs/mavlink.md, PX4 aux global position)."""
 FAILURE_UNIT_SENSOR_GPS = 4
 FAILURE_TYPE_OK, FAILURE_TYPE_OFF = 0, 1
 TAKEOFF_ALT_M = 10.0
@@ -386,6 +390,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     params = {
         "EKF2_AGP0_ID": AGP_ID,
         "EKF2_AGP0_CTRL": 1 if args.fusion else 0,
+        "EKF2_AGP0_DELAY": AGP_DELAY_MS,
         "SYS_FAILURE_EN": 1,
         "COM_RC_IN_MODE": 4,
         "NAV_DLL_ACT": 0,
@@ -393,6 +398,7 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     }
     if plane:
         params.update(PLANE_THRUSTER)
+    params.update(dict(args.px4_param))
     truth_tap = Listener(f"udpin:127.0.0.1:{TRUTH_PORT + instance}", on_truth)
     service_tap = Listener(f"udpin:127.0.0.1:{SERVICE_TAP_PORT}", on_service)
     start_px4(procs, params, instance, args.airframe)
@@ -402,6 +408,8 @@ def gnss_cut(args: argparse.Namespace, procs: Processes, instance: int) -> dict[
     }
     if args.engine:
         sections["engine"] = dict(args.engine)
+    if args.encoder:
+        sections["encoder"] = dict(args.encoder)
     harness.start_companion(procs, sections)
     gcs = GroundStation(PX4_GCS_URL)
     gcs.target_system = instance + 1  # PX4's MAV_SYS_ID is its instance + 1
@@ -534,6 +542,16 @@ def _key_value(text: str) -> tuple[str, float | str]:
         return key, value
 
 
+def _key_number(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"NAME=VALUE expected, got {text!r}")
+    try:
+        return key, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{key}: {value!r} is not a number") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario", choices=("gnss_cut",))
@@ -557,6 +575,22 @@ def main(argv: list[str] | None = None) -> int:
         default=[],
         metavar="KEY=VALUE",
         help="an [engine] setting of the service (a number or a word), repeatable",
+    )
+    ap.add_argument(
+        "--encoder",
+        action="append",
+        type=_key_value,
+        default=[],
+        metavar="KEY=VALUE",
+        help="an [encoder] setting of the service (a number or a word), repeatable",
+    )
+    ap.add_argument(
+        "--px4-param",
+        action="append",
+        type=_key_number,
+        default=[],
+        metavar="NAME=VALUE",
+        help="a PX4 parameter set at boot (e.g. EKF2_AGP0_DELAY=100), repeatable",
     )
     ap.add_argument("--keep", type=Path, default=None, help="run in this folder, keep it")
     ap.add_argument("--out", type=Path, required=True)

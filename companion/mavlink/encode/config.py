@@ -21,6 +21,7 @@ LIVE_KEYS = frozenset(
         "min_vel_acc_mps",
         "uere_m",
         "gps_input_yaw",
+        "px4_agp_lead_s",
         "statustext_min_interval_s",
     }
 )
@@ -55,6 +56,13 @@ class EncoderConfig:
     """Send the solution's (taxi-corrected) yaw in GPS_INPUT.yaw. Off by default: the
     autopilot then fuses it as a GNSS heading (ArduPilot EK3_SRC1_YAW = 2), which must
     be a deliberate choice."""
+    px4_agp_lead_s: float = ranged(0.0, ge=0.0, le=0.5)
+    """GLOBAL_POSITION_SENSOR (PX4): the position is carried forward by the solution's
+    velocity this long (and stamped that much later), s. PX4 stamps an aux global
+    position on arrival and, with ``EKF2_AGP0_DELAY`` = EKF2's fusion horizon, compares
+    it with its newest position then: set this to the time from the solution to its
+    arrival at PX4 (the link's lag) when that is not small; more puts PX4 ahead
+    (docs/mavlink.md, PX4 aux global position)."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
     """Least time between two STATUSTEXTs of the same alert code, s (a change of state
     within a family, e.g. GNSS_BACK then GNSS_LOST, is always sent)."""

@@ -34,6 +34,7 @@ from companion.mavlink.ids import (
     STATUSTEXT_MAX_CHARS,
     STATUSTEXT_MAX_CHUNKS,
 )
+from companion.nav.earth import radii_of_curvature_m
 from companion.types import (
     Alert,
     AlertCode,
@@ -94,6 +95,19 @@ def _floats(value: Any, shape: tuple[int, ...]) -> list[Any]:
 
 def _clamp_int(v: float, lo: int, hi: int) -> int:
     return lo if v < lo else hi if v > hi else int(round(v))
+
+
+def _carried_forward(
+    lat_rad: float, lon_rad: float, alt_m: float, vn_mps: float, ve_mps: float, dt_s: float
+) -> tuple[int, int]:
+    """Latitude and longitude (degE7) ``dt_s`` later at the horizontal velocity (NED)."""
+    m_m, n_m = radii_of_curvature_m(lat_rad)
+    lat = lat_rad + vn_mps * dt_s / (m_m + alt_m)
+    lon = lon_rad + ve_mps * dt_s / ((n_m + alt_m) * math.cos(lat_rad))
+    return (
+        _clamp_int(lat * _DEGE7_PER_RAD, -900_000_000, 900_000_000),
+        _clamp_int(lon * _DEGE7_PER_RAD, -1_800_000_000, 1_800_000_000),
+    )
 
 
 ALERT_FAMILIES: dict[AlertCode, str] = {
@@ -406,6 +420,9 @@ class Encoder:
         else:
             healthy = sol.fix_type >= _FIX_3D
             alt_hae = sol.alt_hae_m
+            lead_s = cfg.px4_agp_lead_s
+            if lead_s > 0.0:
+                lat, lon = _carried_forward(sol.lat_rad, sol.lon_rad, sol.alt_msl_m, vn, ve, lead_s)
             out.append(
                 (
                     self._mod.MAVLink_global_position_sensor_message,
@@ -413,7 +430,7 @@ class Encoder:
                         self.system_id,
                         MAV_COMP_ID_AUTOPILOT1,
                         self.gps_id if self.agp_id is None else self.agp_id,
-                        round(sol.t_s * units.US_PER_S),
+                        round((sol.t_s + lead_s) * units.US_PER_S),
                         0,
                         GLOBAL_POSITION_SRC_ESTIMATOR,
                         GLOBAL_POSITION_PRIMARY if healthy else GLOBAL_POSITION_UNHEALTHY,
