@@ -119,15 +119,7 @@ def print_px4(results: dict[str, list[dict[str, Any]]], cut_s: float) -> None:
     print("'sent': GLOBAL_POSITION_SENSORs sent in the cut from 1.5 s after it began (PX4")
     print("fuses them only 'with'); 'PX4 2 s after': the first 2 s after GNSS returned;")
     print("dAccB: EKF2's accelerometer bias estimate (x, y) moved over the cut")
-    for key in ("with", "without"):
-        done = [r for r in results[key] if r["px4_cut"].get("n")]
-        if done:
-            mean = statistics.fmean(r["px4_cut"]["mean_m"] for r in done)
-            worst = statistics.fmean(r["px4_cut"]["max_m"] for r in done)
-            print(
-                f"PX4 over the cut, {key} the service: mean of means {mean:.2f} m, "
-                f"mean of maxima {worst:.2f} m ({len(done)} runs)"
-            )
+    _print_cut_means(results, "the service")
 
 
 def _latency(r: dict[str, Any], code: str, t0: float) -> str:
@@ -166,14 +158,19 @@ def print_plane(results: dict[str, list[dict[str, Any]]], cut_s: float, cruise_s
                 f"{_latency(r, 'GNSS_BACK', t_back):>5s} {r['service_cover_95_cut']:>6.3f} "
                 f"{','.join(stray) or '-':>12s}"
             )
+    _print_cut_means(results, "the service's aux position")
+
+
+def _print_cut_means(results: dict[str, list[dict[str, Any]]], what: str) -> None:
+    """PX4's error over the cut, averaged over the runs with and without ``what``."""
     for key in ("with", "without"):
         done = [r for r in results[key] if r["px4_cut"].get("n")]
         if done:
             mean = statistics.fmean(r["px4_cut"]["mean_m"] for r in done)
             worst = statistics.fmean(r["px4_cut"]["max_m"] for r in done)
             print(
-                f"PX4 over the cut, {key} the service's aux position: mean of means "
-                f"{mean:.2f} m, mean of maxima {worst:.2f} m ({len(done)} runs)"
+                f"PX4 over the cut, {key} {what}: mean of means {mean:.2f} m, "
+                f"mean of maxima {worst:.2f} m ({len(done)} runs)"
             )
 
 
