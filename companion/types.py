@@ -147,6 +147,27 @@ class AlertCode(enum.Enum):
     RAW_FAULT = "RAW_FAULT"
     RAW_LOST = "RAW_LOST"
     RAW_BACK = "RAW_BACK"
+    SPOOF = "SPOOF"
+    """A receiver suspected of lying consistently (its motion against the IMU's, the
+    barometer's, another receiver's or the carrier phase's; its own or the autopilot's
+    spoofing flag), with the evidence."""
+    SPOOF_END = "SPOOF_END"
+    """The receiver agrees with the independent references again (or they were shown
+    wrong)."""
+    JAM = "JAM"
+    """Jamming suspected or reported (C/N0 down, the receiver's own jamming state)."""
+    JAM_END = "JAM_END"
+    """No jamming any more."""
+
+
+class InterferenceState(enum.Enum):
+    """A receiver's (or the service's) verdict on jamming or spoofing, as MAVLink's
+    GPS_JAMMING_STATE / GPS_SPOOFING_STATE say it (the encoder maps it)."""
+
+    UNKNOWN = "unknown"  # not monitored, or no verdict yet
+    CLEAN = "clean"  # monitored: none
+    MITIGATED = "mitigated"  # present, and mitigated (e.g. the receiver excluded)
+    DETECTED = "detected"  # present
 
 
 class HeadingAction(enum.Enum):
@@ -374,6 +395,26 @@ class RawSolution:
         return self.fis_available and not (self.fault or self.slope_alert or self.residual_alert)
 
 
+@dataclass(frozen=True, slots=True)
+class GnssSignalReport:
+    """Signal-level evidence about one receiver at autopilot time ``t_s``: what the
+    receiver itself, the autopilot (GNSS_INTEGRITY, PX4's GPS flags) or the raw link's own
+    tests (C/N0, clock, Doppler) say about jamming and spoofing.
+
+    ``source`` names who says it (``"autopilot"``, ``"raw"``); ``jam_indicator`` is the
+    receiver's jamming indicator scaled to 0..1 (None: not given); ``evidence`` short
+    human-readable reasons (``"C/N0 spread 0.6 dB-Hz over 9 sats"``) for the alert text.
+    """
+
+    t_s: float
+    receiver_id: int
+    source: str
+    jamming: InterferenceState = InterferenceState.UNKNOWN
+    spoofing: InterferenceState = InterferenceState.UNKNOWN
+    jam_indicator: float | None = None
+    evidence: tuple[str, ...] = ()
+
+
 Sample = (
     ImuSample
     | AttitudeSample
@@ -387,6 +428,7 @@ Sample = (
     | RebootEvent
     | HeadingCommand
     | RawSolution
+    | GnssSignalReport
 )
 """Anything the decoder gives the engine (:meth:`companion.engine.Engine.handle`)."""
 
@@ -462,6 +504,8 @@ class IntegrityReport:
     vpl_m: float
     integrity_ok: bool
     fault_detected: bool
+    spoofing: InterferenceState = InterferenceState.UNKNOWN
+    jamming: InterferenceState = InterferenceState.UNKNOWN
 
 
 @dataclass(frozen=True, slots=True)

@@ -123,9 +123,13 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
     AlertCode.RAW_BACK: "raw",
     AlertCode.GNSS_SLOW: "rate",
     AlertCode.GNSS_STEADY: "rate",
+    AlertCode.SPOOF: "spoof",
+    AlertCode.SPOOF_END: "spoof",
+    AlertCode.JAM: "jam",
+    AlertCode.JAM_END: "jam",
 }
 """Alerts that say one state (GNSS, RTK, the data streams, the raw receiver, the fix
-rate): a change of it is always sent, whatever ``statustext_min_interval_s``; only
+rate, spoofing, jamming): a change of it is always sent, whatever ``statustext_min_interval_s``; only
 repeats of the state last sent are thinned."""
 
 
