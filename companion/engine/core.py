@@ -353,7 +353,8 @@ class Engine:
         watch = self.watch
         resumed: list[Output] = []
         if kind in _DATA_KINDS:
-            silence_s = watch.on_data(t_s)
+            # a data kind (IMU, attitude, fix): each carries its arrival time
+            silence_s = watch.on_data(t_s, sample.t_rx_s)  # type: ignore[union-attr]
             if silence_s is not None:
                 resumed = self._after_silence(t_s, silence_s)
         elif kind is RebootEvent and watch.silent:
@@ -431,7 +432,8 @@ class Engine:
     def _gap_started(self, alerts: list[Alert]) -> list[Alert]:
         """At a GNSS loss, choose the bridge's motion model on the evidence (inertial
         prediction or constant velocity, :mod:`.bridge_choice`); the loss alert says which
-        when it is constant velocity."""
+        when it is constant velocity. A loss while every stream is silent or stalled is
+        said by the silence's ``NO_DATA`` (:mod:`.silence`)."""
         if not alerts:
             return alerts
         out: list[Alert] = []
@@ -453,6 +455,10 @@ class Engine:
                     # (a slow link's GNSS timeout may outlast its silence timeout)
                     self.stats.gnss["loss_in_silence"] += 1
                     continue
+                if self.watch.stalled(alert.t_s, self.outage.median_fix_interval_s):
+                    # every stream stopped, GNSS with them: one alert, the silence's
+                    self.stats.gnss["loss_in_silence"] += 1
+                    alert = self.watch.announce(alert.t_s)
             out.append(alert)
         return out
 
