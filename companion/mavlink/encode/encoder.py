@@ -9,6 +9,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -132,6 +133,15 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
 rate, spoofing, jamming): a change of it is always sent, whatever ``statustext_min_interval_s``; only
 repeats of the state last sent are thinned."""
 
+STATE_OF_ALERT: dict[AlertCode, Callable[[Alert], object]] = {
+    AlertCode.INTEGRITY: lambda alert: alert.severity,
+    AlertCode.CAT: lambda alert: alert.text,
+}
+"""Codes each of whose alerts says a state, and what the state is: INTEGRITY's severity
+(lost CRITICAL, restored NOTICE), CAT's text (the new category). A change of it is always
+sent, as a change of code within a family of :data:`ALERT_FAMILIES`: a restoration, or
+a category, thinned away would leave the ground with an older state than the service's."""
+
 
 class Encoder:
     """Builds and packs the service's outgoing MAVLink messages.
@@ -163,8 +173,9 @@ class Encoder:
         self._has_integrity = hasattr(self._mod, "MAVLink_gnss_integrity_message")
         self._first_alt_mm: int | None = None
         self._last_alert_t: dict[AlertCode, float] = {}
-        self._family_state: dict[str, AlertCode] = {}
-        """The last code sent of each family of :data:`ALERT_FAMILIES`."""
+        self._family_state: dict[str, object] = {}
+        """The last state sent of each family of :data:`ALERT_FAMILIES` (its code) and of
+        each code of :data:`STATE_OF_ALERT`."""
         self._text_id = 0
         """Id of the last chunked STATUSTEXT (1..65535, wrapping)."""
         self._intervals = {
@@ -452,10 +463,14 @@ class Encoder:
     def _alert(self, alert: Alert) -> list[Any]:
         code = alert.code
         family = ALERT_FAMILIES.get(code)
+        state: object = code
+        state_of = STATE_OF_ALERT.get(code)
+        if state_of is not None:
+            family, state = code.value, state_of(alert)
         # a change of state within a family (GNSS lost -> back -> lost) is always sent: the
         # interval only thins repeats of the state last sent, so the ground never keeps an
         # older state than the service's
-        change = family is not None and self._family_state.get(family, code) is not code
+        change = family is not None and self._family_state.get(family, state) != state
         last = self._last_alert_t.get(code)
         interval = self._intervals.get(code, self.config.statustext_min_interval_s)
         if not change and last is not None and last <= alert.t_s < last + interval:
@@ -463,7 +478,7 @@ class Encoder:
             return []
         self._last_alert_t[code] = alert.t_s
         if family is not None:
-            self._family_state[family] = code
+            self._family_state[family] = state
         # STATUSTEXT is read as ASCII by most ground stations (pymavlink among them):
         # spell the few non-ASCII signs the alerts use, drop anything else
         plain = alert.text.translate(_ASCII_SPELLING)
