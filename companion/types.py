@@ -124,7 +124,6 @@ class AlertCode(enum.Enum):
     RTK_LOST = "RTK_LOST"
     RTK_BACK = "RTK_BACK"
     GNSS_STALE = "GNSS_STALE"
-    BRIDGING = "BRIDGING"
     GNSS_BACK = "GNSS_BACK"
     GNSS_SLOW = "GNSS_SLOW"
     GNSS_STEADY = "GNSS_STEADY"
