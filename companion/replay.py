@@ -144,7 +144,9 @@ def replay(
     """
     # the decoder is the only consumer of the messages: light messages where it takes them;
     # a DataFlash .bin or a PX4 .ulg (by content) is read as the streams its .tlog holds
-    reader = open_flight_log(in_path, light_ids=LIGHT_MESSAGE_IDS)
+    # a telemetry log is parsed with the dialect the service parses its links with
+    dialect = (config or Config()).encoder.dialect
+    reader = open_flight_log(in_path, light_ids=LIGHT_MESSAGE_IDS, dialect=dialect)
     prefix = getattr(reader, "stats_prefix", "tlog_")
     records = iter(reader)
     first_record = next(records, None)

@@ -232,3 +232,24 @@ def test_only_a_topic_with_the_flags_gives_gnss_integrity(name: str) -> None:
     events, _ = _events({name: cols}, collections.Counter())
     assert [e for e in events if e.name == "gnss_integrity"] == []
     assert any(e.name == "gps_raw_int" for e in events)
+
+
+def test_a_telemetry_log_is_replayed_with_the_services_dialect(tmp_path: Path) -> None:
+    """A PX4 telemetry log holding GNSS_INTEGRITY: replayed with the default dialect the
+    frame is an unknown one (as on a link), with ``all`` it raises JAM."""
+    from companion.mavlink.tlog import TlogWriter
+    from companion.replay import replay
+
+    ap = _Autopilot()
+    path = tmp_path / "px4.tlog"
+    with TlogWriter(path) as w:
+        for k, msg in enumerate(
+            (heartbeat(12), attitude(10_000), _integrity(0, 3, 1), attitude(10_100))
+        ):
+            w.write(1_700_000_000.0 + 0.1 * k, bytes(msg.pack(ap.mav)))
+    for dialect, jam in (("ardupilotmega", False), ("all", True)):
+        cfg = Config()
+        cfg = dataclasses.replace(cfg, encoder=dataclasses.replace(cfg.encoder, dialect=dialect))
+        summary = replay(path, tmp_path / f"out_{dialect}.tlog", cfg)
+        assert (summary.alerts.get("JAM", 0) == 1) is jam
+        assert ("tlog_unknown_frame" in summary.rejections) is not jam
