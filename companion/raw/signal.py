@@ -13,8 +13,8 @@ themselves, whatever the position says (the inertial and separation tests judge 
 * **C/N0 level against its baseline** (jamming: C/N0 falls on every satellite, then
   lock is lost). Each signal's C/N0 against its own slow baseline (exponential, time
   constant ``baseline_tau_s``, frozen while the test trips, kept through a loss of
-  lock); the median deviation, one-sided. After a trip, losing more than half of the
-  signals keeps it tripped.
+  lock); the median deviation, one-sided, held until the drop is back under half its
+  limit. After a trip, losing more than half of the signals keeps it tripped.
 * **Receiver clock step.** The change of each pseudorange between two epochs against
   the range change its Doppler integrates (trapezoid): their common part is a step of
   the receiver's clock, which the Doppler (a rate) does not see. Robust scale (median
@@ -66,6 +66,8 @@ sight (an error of 10 ms moves a line of sight by 1e-5 rad)."""
 TIME_TOL_S = 0.05
 """Receiver times this close are the same epoch (they carry the receiver's clock bias
 and drift: milliseconds)."""
+LEVEL_RELEASE = 0.5
+"""Once tripped, the level test holds while the drop is above this fraction of its limit."""
 SCALE_EPOCHS = 40
 """Epochs whose code-minus-Doppler scales make the clock test's (10 s at 4 Hz)."""
 
@@ -93,12 +95,14 @@ class SignalTestConfig:
     step_sigma_dbhz: float = 2.5
     """σ of one signal's C/N0 change between epochs (the walk: 2.49 dB-Hz, body shadowing
     and the integer C/N0 included)."""
-    level_sigma_dbhz: float = 3.8
-    """σ of one signal's C/N0 about its baseline (the walk: 3.8 dB-Hz, tails included;
-    2.9 from the median absolute deviation)."""
-    baseline_tau_s: float = 30.0
-    """Time constant of each signal's C/N0 baseline, s."""
-    baseline_keep_s: float = 120.0
+    level_sigma_dbhz: float = 4.6
+    """σ of one signal's C/N0 about its baseline (the walk: 4.6 dB-Hz, tails included;
+    3.5 from the median absolute deviation)."""
+    baseline_tau_s: float = 120.0
+    """Time constant of each signal's C/N0 baseline, s: a jammer nearing at r dB/s leaves
+    the baseline ``r·τ`` behind (0.2 dB/s: 24 dB), a satellite's elevation changes its
+    C/N0 over tens of minutes."""
+    baseline_keep_s: float = 300.0
     """A lost signal's baseline is kept this long (compared when it is tracked again)."""
     lost_fraction: float = 0.5
     """After the level test trips, fewer than this fraction of the signals tracked before
@@ -355,6 +359,8 @@ class SignalTests:
             drop = -float(np.median(dev))
             limit = median_limit(len(dev), cfg.level_sigma_dbhz, self._p, two_sided=False)
             self.stats.update(drop_dbhz=drop, drop_limit=limit)
+            if self._level_tripped:
+                limit *= LEVEL_RELEASE  # hysteresis: a drop near the limit is one episode
             if drop > limit:
                 evidence = f"C/N0 {drop:.1f} dB-Hz below its baseline on {len(dev)} signals"
         if (

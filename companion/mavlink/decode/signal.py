@@ -12,7 +12,7 @@ receiver's own jamming and spoofing flags as the autopilot relays them.
   :class:`~companion.types.InterferenceState`; any other value is rejected
   (``bad_enum``). PX4 sends 3 for u-blox's "spoofing indicated" as well as "multiple
   indications", and for "jamming warning" as well as "critical"; with no GPS it sends
-  the message with everything 0 (unknown) once a second.
+  the message with its states 0 (unknown) once a second.
 
 The report's ``source`` is ``"autopilot"``: the receiver's own verdict
 (:mod:`companion.integrity.signal`). ArduPilot's dialect does not carry message 441: an
