@@ -141,3 +141,23 @@ def test_a_simulated_jamming_through_the_link_raises_jam_once_then_its_end() -> 
     assert t0 + 70.0 < end.t_s < t0 + 85.0
     # at most one report a second while nothing changes (4 Hz epochs)
     assert len(reports) < 0.5 * len(epochs)
+
+
+def test_the_bundled_walk_through_the_link_reports_clean_and_raises_nothing() -> None:
+    from .test_link import _fix as walk_fix
+    from .test_link import _items
+
+    link = RawLink(RawConfig(file="cut"))
+    monitor = SignalMonitor()
+    reports = []
+    for item in _items():
+        out = link.on_item(item, 0.0)
+        if isinstance(item, PvtFix):
+            out += link.on_fix(walk_fix(item))
+        for o in out:
+            if isinstance(o, GnssSignalReport):
+                reports.append(o)
+                assert monitor.on_report(o) == []
+    assert len(reports) > 20  # from the time mapping on, about one a second
+    assert all(r.jamming is S.CLEAN and r.spoofing is S.CLEAN for r in reports)
+    assert monitor.spoof_evidence(0, reports[-1].t_s) == ()
