@@ -23,8 +23,16 @@ from companion.mavlink.ids import (
     GLOBAL_POSITION_PRIMARY,
     GLOBAL_POSITION_SRC_ESTIMATOR,
     GLOBAL_POSITION_UNHEALTHY,
+    GPS_JAMMING_STATE_DETECTED,
+    GPS_JAMMING_STATE_MITIGATED,
+    GPS_JAMMING_STATE_NOT_JAMMED,
+    GPS_JAMMING_STATE_UNKNOWN,
     GPS_RAIM_STATE_FAILED,
     GPS_RAIM_STATE_OK,
+    GPS_SPOOFING_STATE_DETECTED,
+    GPS_SPOOFING_STATE_MITIGATED,
+    GPS_SPOOFING_STATE_NOT_SPOOFED,
+    GPS_SPOOFING_STATE_UNKNOWN,
     MAV_AUTOPILOT_INVALID,
     MAV_COMP_ID_AUTOPILOT1,
     MAV_COMP_ID_ONBOARD_COMPUTER,
@@ -42,6 +50,7 @@ from companion.types import (
     AutopilotFlavour,
     FixType,
     IntegrityReport,
+    InterferenceState,
     NamedValue,
     NavMode,
     NavSolution,
@@ -73,6 +82,21 @@ _US_PER_S = units.US_PER_S
 _CDEG_PER_RAD = units.CDEG_PER_RAD
 _TWO_PI = 2.0 * math.pi
 
+
+JAMMING_STATE = {
+    InterferenceState.UNKNOWN: GPS_JAMMING_STATE_UNKNOWN,
+    InterferenceState.CLEAN: GPS_JAMMING_STATE_NOT_JAMMED,
+    InterferenceState.MITIGATED: GPS_JAMMING_STATE_MITIGATED,
+    InterferenceState.DETECTED: GPS_JAMMING_STATE_DETECTED,
+}
+"""GNSS_INTEGRITY ``jamming_state`` of the service's verdict."""
+SPOOFING_STATE = {
+    InterferenceState.UNKNOWN: GPS_SPOOFING_STATE_UNKNOWN,
+    InterferenceState.CLEAN: GPS_SPOOFING_STATE_NOT_SPOOFED,
+    InterferenceState.MITIGATED: GPS_SPOOFING_STATE_MITIGATED,
+    InterferenceState.DETECTED: GPS_SPOOFING_STATE_DETECTED,
+}
+"""GNSS_INTEGRITY ``spoofing_state`` of the service's verdict."""
 
 _ASCII_SPELLING = str.maketrans({"±": "+/-", "°": "deg", "σ": "sigma", "—": "-"})
 
@@ -130,8 +154,8 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
     AlertCode.JAM_END: "jam",
 }
 """Alerts that say one state (GNSS, RTK, the data streams, the raw receiver, the fix
-rate, spoofing, jamming): a change of it is always sent, whatever ``statustext_min_interval_s``; only
-repeats of the state last sent are thinned."""
+rate, spoofing, jamming): a change of it is always sent, whatever
+``statustext_min_interval_s``; only repeats of the state last sent are thinned."""
 
 STATE_OF_ALERT: dict[AlertCode, Callable[[Alert], object]] = {
     AlertCode.INTEGRITY: lambda alert: alert.severity,
@@ -536,10 +560,10 @@ class Encoder:
         return [
             self._mod.MAVLink_gnss_integrity_message(
                 self.gps_id,
-                0,
-                0,
-                0,
-                0,
+                0,  # system_errors
+                0,  # authentication_state: unknown
+                JAMMING_STATE[rep.jamming],
+                SPOOFING_STATE[rep.spoofing],
                 GPS_RAIM_STATE_OK if ok else GPS_RAIM_STATE_FAILED,
                 cm(rep.hpl_m),
                 cm(rep.vpl_m),
