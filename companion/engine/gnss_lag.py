@@ -4,10 +4,17 @@ and over the autopilot's parameter where that disagrees.
 Each ``window_s`` of fixes gives one estimate (:mod:`companion.nav.gnss_lag`) of the
 whole lag (the one in use plus the residual); the windows do not overlap and are
 combined by their inverse variances, the sigma widened by the windows' own scatter where
-it exceeds their sigmas (Birge's ratio). Once the combination has ``min_windows`` windows
-and a sigma under ``max_sigma_s``, and differs from the lag in use by more than
-``max(k_sigma sigma, min_change_s)``, :meth:`LagTracker.take` hands it out once: the pipeline
-places the fixes with it (announcing it where the autopilot's parameter says otherwise).
+it exceeds their sigmas (Birge's ratio). A lag is switched in only on evidence that stays
+convincing: every ``group_windows`` windows that gave an estimate make one *verdict*
+(their combination), and :meth:`LagTracker.take` hands out a lag once ``verdicts``
+consecutive verdicts, each surer than ``max_sigma_s``, each differ from the lag in use
+by more than ``k`` of their sigmas and by ``min_change_s``, in the same direction, and
+agree with each other; the lag handed out is their combination. The verdicts use
+disjoint windows, so with the lag in use right a chain of them passes with probability
+``2 Phi(-k)^verdicts`` at most: ``k`` is chosen so that this is
+``false_switch_prob`` (:func:`switch_threshold`). The pipeline then carries the fixes to
+it (:mod:`companion.engine.lag_ramp`; announced where the autopilot's parameter says
+otherwise).
 
 The estimator measures the lag against the IMU's stamps; those may be late themselves
 (filtered readings, stamped when sent). Their offset against the attitude stream is
@@ -23,6 +30,8 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+
+from scipy.stats import chi2, norm
 
 from companion.nav.gnss_lag import GnssLagEstimator, LagConfig
 from companion.nav.imu_stamp import ImuStampEstimator, StampOffsetConfig
@@ -42,13 +51,23 @@ class MeasuredLag:
 @dataclass(frozen=True, slots=True)
 class LagTrackerConfig:
     window_s: float = 20.0
-    min_windows: int = 3
+    group_windows: int = 3
+    """Windows (that gave an estimate) combined into one verdict."""
+    verdicts: int = 2
+    """Consecutive verdicts that must each say the same (six windows: two minutes of
+    manoeuvres at least) before a lag is switched in."""
+    false_switch_prob: float = 1e-5
+    """Probability that a chain of ``verdicts`` switches a lag while the one in use is
+    right (the windows' sigmas honest): each verdict must differ by ``k`` of its sigmas,
+    ``2 Phi(-k)^verdicts`` = this (k = 2.84 for two verdicts). One verdict per minute at
+    most: 6e-4 false switches per flight hour at most."""
+    consistency_prob: float = 1e-3
+    """The verdicts must agree with each other: their chi-square about their combination
+    below its ``1 - consistency_prob`` quantile (a bias that wanders, not a lag)."""
     max_sigma_s: float = 0.02
     min_change_s: float = 0.01
-    k_sigma: float = 2.0
-    """The measurement replaces the lag in use when they differ by more than this many
-    sigmas: choosing between two values, the measurement's expected squared error is
-    sigma^2, the other's (difference^2 - sigma^2), smaller only below sqrt(2) sigma."""
+    """A lag closer than this to the one in use is not switched in (a tenth of a 10 Hz
+    fix interval)."""
     max_lag_s: float = 0.5
     offset_window_s: float = 30.0
     """The IMU stamp offset's windows."""
@@ -74,7 +93,12 @@ class LagTracker:
         self._window_start_s: float | None = None
         self._windows: list[tuple[float, float]] = []
         """(whole lag, sigma) of each window that gave an estimate, s."""
-        self._handed: MeasuredLag | None = None
+        self._group: list[tuple[float, float]] = []
+        """The windows of the verdict being formed."""
+        self._verdicts: list[MeasuredLag] = []
+        """The latest verdicts since the lag in use changed (against the IMU's stamps)."""
+        self.k_switch = switch_threshold(self.config.false_switch_prob, self.config.verdicts)
+        """How many of its sigmas each verdict must differ by."""
         self.last: MeasuredLag | None = None
         """The combination so far, against the IMU's stamps (None before a window gave an
         estimate)."""
@@ -83,10 +107,15 @@ class LagTracker:
         self._offset_windows: list[tuple[float, float]] = []
         self.imu_offset: MeasuredLag | None = None
         """The IMU stamps' offset against the attitude's so far (combined windows)."""
+        self._offset_taken: MeasuredLag | None = None
+        """The offset last taken in (:meth:`take_offset`)."""
 
     def restart(self, lag_in_use_s: float) -> None:
         """The stamps' lag changed (or the autopilot rebooted): the window starts over; the
-        windows already combined stay (they measured the whole lag)."""
+        windows already combined stay (they measured the whole lag), the verdicts judged
+        against the lag in use start again."""
+        if lag_in_use_s != self.lag_in_use_s:
+            self._verdicts.clear()
         self.lag_in_use_s = lag_in_use_s
         self.estimator.reset()
         self._window_start_s = None
@@ -113,6 +142,18 @@ class LagTracker:
             if est is not None:
                 self._offset_windows.append((est.offset_s, est.sigma_s))
                 self.imu_offset = combine(self._offset_windows)
+
+    def take_offset(self) -> MeasuredLag | None:
+        """The IMU stamps' offset, once, when it becomes sure enough to be added to the lag
+        (``max_offset_sigma_s``) or moves by more than that from the one taken before."""
+        off, cfg = self.imu_offset, self.config
+        if off is None or off.sigma_s > cfg.max_offset_sigma_s:
+            return None
+        taken = self._offset_taken
+        if taken is not None and abs(off.lag_s - taken.lag_s) <= cfg.max_offset_sigma_s:
+            return None
+        self._offset_taken = off
+        return off
 
     def on_imu(self, s: ImuSample) -> None:
         if self._imu_id is None:
@@ -161,10 +202,20 @@ class LagTracker:
         est = self.estimator.estimate()
         self.estimator.reset()
         self._window_start_s = s.t_s
-        if est is None:
-            return
-        self._windows.append((self.lag_in_use_s + est.lag_s, est.sigma_s))
+        if est is not None:
+            self.add_window(self.lag_in_use_s + est.lag_s, est.sigma_s)
+
+    def add_window(self, lag_s: float, sigma_s: float) -> None:
+        """One window's estimate of the whole lag (s, against the IMU's stamps): into the
+        combination, and into the verdict being formed."""
+        window = (lag_s, sigma_s)
+        self._windows.append(window)
         self.last = combine(self._windows)
+        self._group.append(window)
+        if len(self._group) >= self.config.group_windows:
+            self._verdicts.append(combine(self._group))
+            self._group = []
+            del self._verdicts[: -self.config.verdicts]
 
     def measured(self) -> MeasuredLag | None:
         """The combined lag against the attitude's clock: the IMU stamps' offset added
@@ -177,18 +228,47 @@ class LagTracker:
         )
 
     def take(self) -> MeasuredLag | None:
-        """The measured lag, once, when it is sure and differs from the one in use."""
-        cfg, m = self.config, self.measured()
-        if m is None or m.windows < cfg.min_windows or m.sigma_s > cfg.max_sigma_s:
+        """The measured lag, once, when the last ``verdicts`` verdicts each say it differs
+        from the one in use (surely, by more than ``k`` sigmas and ``min_change_s``, the
+        same way) and agree with each other: their combination, against the attitude's
+        clock. None otherwise."""
+        cfg = self.config
+        verdicts = self._verdicts
+        if len(verdicts) < cfg.verdicts:
             return None
-        if not 0.0 <= m.lag_s <= cfg.max_lag_s:
+        off = self.imu_offset
+        offset_s, offset_sd = (
+            (off.lag_s, off.sigma_s)
+            if off is not None and off.sigma_s <= cfg.max_offset_sigma_s
+            else (0.0, 0.0)
+        )
+        signs = set()
+        for v in verdicts:
+            diff = v.lag_s + offset_s - self.lag_in_use_s
+            if v.sigma_s > cfg.max_sigma_s or abs(diff) <= max(
+                self.k_switch * v.sigma_s, cfg.min_change_s
+            ):
+                return None
+            signs.add(diff > 0.0)
+        if len(signs) != 1:
             return None
-        if abs(m.lag_s - self.lag_in_use_s) <= max(cfg.k_sigma * m.sigma_s, cfg.min_change_s):
+        merged = combine([(v.lag_s, v.sigma_s) for v in verdicts])
+        spread = sum(((v.lag_s - merged.lag_s) / v.sigma_s) ** 2 for v in verdicts)
+        if spread > chi2.isf(cfg.consistency_prob, len(verdicts) - 1):
             return None
-        if self._handed is not None and abs(m.lag_s - self._handed.lag_s) <= cfg.min_change_s:
+        lag_s = merged.lag_s + offset_s
+        if not 0.0 <= lag_s <= cfg.max_lag_s:
             return None
-        self._handed = m
-        return m
+        self._verdicts.clear()  # handed out once
+        windows = cfg.verdicts * cfg.group_windows
+        return MeasuredLag(lag_s, math.hypot(merged.sigma_s, offset_sd), windows, offset_s)
+
+
+def switch_threshold(false_switch_prob: float, verdicts: int) -> float:
+    """How many of its sigmas each of ``verdicts`` independent verdicts must differ by for
+    a chain of them, all the same way, to pass with probability ``false_switch_prob``
+    when there is nothing to find: ``2 Phi(-k)^verdicts = false_switch_prob``."""
+    return float(norm.isf((0.5 * false_switch_prob) ** (1.0 / verdicts)))
 
 
 def combine(windows: list[tuple[float, float]]) -> MeasuredLag:
