@@ -2,7 +2,7 @@
 never blamed on a receiver; a new lag carried in by steps the navigator cannot see.
 
 The end-to-end flights (``slow``): a simulated MEMS aircraft in a steady 13 deg banked
-turn with an RTK-fixed receiver, where a heading error looks like a lag (issue 35), and
+turn with an RTK-fixed receiver, where a heading error looks like a lag, and
 the same aircraft in alternating turns with fixes stamped 80 ms late."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from companion.engine import Engine
 from companion.engine.lag_ramp import LagRamp
@@ -132,7 +133,7 @@ def _fly(tmp: Path, turns: tuple[float, ...], lag_s: float, seed: int) -> Flown:
     """The flight through a pipeline (as a replay), its fixes stamped ``lag_s`` late."""
     flight = simulate(make_scenario("nominal", cruise_turns_deg=turns, **TURN), seed)
     for _, msg in flight.messages:
-        if msg.get_type() == "GPS_RAW_INT":
+        if isinstance(msg, apm.MAVLink_gps_raw_int_message):
             msg.time_usec += round(lag_s * 1e6)
     path = write_tlog(flight, tmp / "turn.tlog")
     pipeline = Pipeline()
@@ -176,7 +177,7 @@ class Flown:
 
 @pytest.mark.slow
 def test_steady_banked_turn_switches_no_lag_and_raises_nothing(tmp_path: Path) -> None:
-    """The steady turn of issue 35: a heading error there is a lag, so none is measured
+    """The steady turn: a heading error there is a lag, so none is measured
     (the heading is solved for with it), none is switched in, nothing is alerted, and the
     published error stays within the published accuracy."""
     flown = _fly(tmp_path, (1440.0,), 0.0, seed=1)

@@ -5,22 +5,27 @@ Each ``window_s`` of fixes gives one estimate (:mod:`companion.nav.gnss_lag`) of
 whole lag (the one in use plus the residual); the windows do not overlap and are
 combined by their inverse variances, the sigma widened by the windows' own scatter where
 it exceeds their sigmas (Birge's ratio). A lag is switched in only on evidence that stays
-convincing: every ``group_windows`` windows that gave an estimate make one *verdict*
-(their combination), and :meth:`LagTracker.take` hands out a lag once ``verdicts``
-consecutive verdicts, each surer than ``max_sigma_s``, each differ from the lag in use
-by more than ``k`` of their sigmas and by ``min_change_s``, in the same direction, and
-agree with each other; the lag handed out is their combination. The verdicts use
-disjoint windows, so with the lag in use right a chain of them passes with probability
-``2 Phi(-k)^verdicts`` at most: ``k`` is chosen so that this is
-``false_switch_prob`` (:func:`switch_threshold`). The pipeline then carries the fixes to
-it (:mod:`companion.engine.lag_ramp`; announced where the autopilot's parameter says
-otherwise).
+convincing over several windows. Windows that gave an estimate are gathered, in order, into
+*verdicts*: a verdict closes as soon as the windows gathered are convincing (combined,
+surer than ``max_sigma_s`` and differing from the lag in use by more than ``k`` of their
+sigma plus a margin for the IMU stamps' offset, below, and by ``min_change_s``), or, after
+``group_windows`` windows that are not, as a "no" that breaks the chain (a weak window
+does not break it, nor make it). Once ``verdicts`` consecutive verdicts say the same way
+and agree with each other, :meth:`LagTracker.take` hands out their combination. The
+verdicts use disjoint windows; each is looked at up to ``group_windows`` times, so with
+the lag in use right a verdict passes one way with probability ``group_windows Phi(-k)``
+at most, a chain of them ``2 (group_windows Phi(-k))^verdicts``: ``k`` is chosen so that
+this is half of ``false_switch_prob`` (:func:`switch_threshold`). The pipeline then
+carries the fixes to it (:mod:`companion.engine.lag_control`; announced where the
+autopilot's parameter says otherwise).
 
 The estimator measures the lag against the IMU's stamps; those may be late themselves
 (filtered readings, stamped when sent). Their offset against the attitude stream is
 measured alongside (:mod:`companion.nav.imu_stamp`, windows of their own combined the
 same way) and added: the lag handed out is against the attitude's clock, which the
-service's outputs carry.
+service's outputs carry. Until it is measured it is taken as 0 +/- ``offset_prior_s``,
+and a verdict must then clear ``z`` times that more (the other half of
+``false_switch_prob``).
 
 Pure: samples in, a decision out.
 """
@@ -52,15 +57,22 @@ class MeasuredLag:
 class LagTrackerConfig:
     window_s: float = 20.0
     group_windows: int = 3
-    """Windows (that gave an estimate) combined into one verdict."""
-    verdicts: int = 2
-    """Consecutive verdicts that must each say the same (six windows: two minutes of
-    manoeuvres at least) before a lag is switched in."""
+    """A verdict gathers at most this many windows before it says "no"."""
+    verdicts: int = 3
+    """Consecutive verdicts that must each say the same before a lag is switched in."""
     false_switch_prob: float = 1e-5
-    """Probability that a chain of ``verdicts`` switches a lag while the one in use is
-    right (the windows' sigmas honest): each verdict must differ by ``k`` of its sigmas,
-    ``2 Phi(-k)^verdicts`` = this (k = 2.84 for two verdicts). One verdict per minute at
-    most: 6e-4 false switches per flight hour at most."""
+    """Probability that a lag is switched in while the one in use is right (the windows'
+    sigmas honest), split in two halves: the IMU stamps' offset off by more than the
+    margin allowed for it (``z`` of its sigma, ``2 Phi(-z)`` = half), and a chain of
+    ``verdicts`` each beyond ``k`` of its sigma the same way at one of its looks
+    (``2 (group_windows Phi(-k))^verdicts`` = half): k = 2.61, z = 4.56. One verdict
+    per window at most (20 s): 1.8e-3 false switches per flight hour at most."""
+    offset_prior_s: float = 0.01
+    """The IMU stamps' offset before it is measured (or while its sigma is over
+    ``max_offset_sigma_s``): 0 +/- this (1-sigma). ArduPilot's 20 Hz second-order
+    accelerometer and gyro filters delay the readings by 11 ms (their group delay
+    sqrt(2) / (2 pi f_c)); SITL measured 11.5 ms. So before it is known a lag is switched
+    in only beyond a 46 ms margin (z of this)."""
     consistency_prob: float = 1e-3
     """The verdicts must agree with each other: their chi-square about their combination
     below its ``1 - consistency_prob`` quantile (a bias that wanders, not a lag)."""
@@ -80,6 +92,8 @@ class LagTracker:
     the attitude at its time) and combines its windows."""
 
     MAX_PENDING = 50
+    MAX_REJUDGED = 30
+    """Windows judged again when the IMU stamps' offset becomes known (ten minutes)."""
 
     def __init__(self, config: LagTrackerConfig | None = None) -> None:
         self.config = config or LagTrackerConfig()
@@ -94,11 +108,21 @@ class LagTracker:
         self._windows: list[tuple[float, float]] = []
         """(whole lag, sigma) of each window that gave an estimate, s."""
         self._group: list[tuple[float, float]] = []
-        """The windows of the verdict being formed."""
+        """The windows of the verdict being gathered."""
         self._verdicts: list[MeasuredLag] = []
-        """The latest verdicts since the lag in use changed (against the IMU's stamps)."""
-        self.k_switch = switch_threshold(self.config.false_switch_prob, self.config.verdicts)
+        """The chain of convincing verdicts, the same way, since the last "no" or change
+        of the lag in use (against the attitude's clock)."""
+        self._ready: MeasuredLag | None = None
+        """A lag the chain has made, not handed out yet."""
+        self._since: deque[tuple[float, float]] = deque(maxlen=self.MAX_REJUDGED)
+        """The windows since the lag in use last changed (judged again, once, when the IMU
+        stamps' offset becomes known)."""
+        self._offset_known = False
+        half = 0.5 * self.config.false_switch_prob
+        self.k_switch = switch_threshold(half, self.config.verdicts, self.config.group_windows)
         """How many of its sigmas each verdict must differ by."""
+        self.z_offset = float(norm.isf(0.5 * half))
+        """How many of its sigmas the IMU stamps' offset may be off by."""
         self.last: MeasuredLag | None = None
         """The combination so far, against the IMU's stamps (None before a window gave an
         estimate)."""
@@ -116,6 +140,9 @@ class LagTracker:
         against the lag in use start again."""
         if lag_in_use_s != self.lag_in_use_s:
             self._verdicts.clear()
+            self._group = []
+            self._ready = None
+            self._since.clear()
         self.lag_in_use_s = lag_in_use_s
         self.estimator.reset()
         self._window_start_s = None
@@ -142,6 +169,13 @@ class LagTracker:
             if est is not None:
                 self._offset_windows.append((est.offset_s, est.sigma_s))
                 self.imu_offset = combine(self._offset_windows)
+                if not self._offset_known and self._offset()[1] < self.config.offset_prior_s:
+                    # known at last: the windows since the last change judged again with it
+                    # (before, they had to clear the prior's margin)
+                    self._offset_known = True
+                    self._group, self._verdicts = [], []
+                    for window in self._since:
+                        self._judge(window)
 
     def take_offset(self) -> MeasuredLag | None:
         """The IMU stamps' offset, once, when it becomes sure enough to be added to the lag
@@ -207,15 +241,56 @@ class LagTracker:
 
     def add_window(self, lag_s: float, sigma_s: float) -> None:
         """One window's estimate of the whole lag (s, against the IMU's stamps): into the
-        combination, and into the verdict being formed."""
+        combination, and into the verdict being gathered (module docstring)."""
         window = (lag_s, sigma_s)
         self._windows.append(window)
         self.last = combine(self._windows)
+        self._since.append(window)
+        self._judge(window)
+
+    def _judge(self, window: tuple[float, float]) -> None:
+        """One window into the verdict being gathered, and the chain (module docstring)."""
+        cfg = self.config
         self._group.append(window)
-        if len(self._group) >= self.config.group_windows:
-            self._verdicts.append(combine(self._group))
-            self._group = []
-            del self._verdicts[: -self.config.verdicts]
+        gathered = combine(self._group)
+        offset_s, offset_sd = self._offset()
+        diff = gathered.lag_s + offset_s - self.lag_in_use_s
+        convincing = gathered.sigma_s <= cfg.max_sigma_s and abs(diff) > max(
+            self.k_switch * gathered.sigma_s + self.z_offset * offset_sd, cfg.min_change_s
+        )
+        if not convincing:
+            if len(self._group) >= cfg.group_windows:  # a "no": the chain starts again
+                self._group = []
+                self._verdicts.clear()
+            return
+        self._group = []
+        verdict = MeasuredLag(gathered.lag_s + offset_s, gathered.sigma_s, gathered.windows)
+        chain = self._verdicts
+        if chain and (chain[-1].lag_s > self.lag_in_use_s) != (diff > 0.0):
+            chain.clear()  # the other way
+        chain.append(verdict)
+        del chain[: -cfg.verdicts]
+        if len(chain) < cfg.verdicts:
+            return
+        merged = combine([(v.lag_s, v.sigma_s) for v in chain])
+        spread = sum(((v.lag_s - merged.lag_s) / v.sigma_s) ** 2 for v in chain)
+        if spread > chi2.isf(cfg.consistency_prob, len(chain) - 1):
+            del chain[0]  # they disagree: the oldest goes, the chain waits for another
+            return
+        if not 0.0 <= merged.lag_s <= cfg.max_lag_s:
+            return
+        windows = sum(v.windows for v in chain)
+        chain.clear()
+        self._ready = MeasuredLag(
+            merged.lag_s, math.hypot(merged.sigma_s, offset_sd), windows, offset_s
+        )
+
+    def _offset(self) -> tuple[float, float]:
+        """The IMU stamps' offset and its sigma: measured once sure enough, else the prior."""
+        off, cfg = self.imu_offset, self.config
+        if off is not None and off.sigma_s <= cfg.max_offset_sigma_s:
+            return off.lag_s, off.sigma_s
+        return 0.0, cfg.offset_prior_s
 
     def measured(self) -> MeasuredLag | None:
         """The combined lag against the attitude's clock: the IMU stamps' offset added
@@ -228,47 +303,17 @@ class LagTracker:
         )
 
     def take(self) -> MeasuredLag | None:
-        """The measured lag, once, when the last ``verdicts`` verdicts each say it differs
-        from the one in use (surely, by more than ``k`` sigmas and ``min_change_s``, the
-        same way) and agree with each other: their combination, against the attitude's
-        clock. None otherwise."""
-        cfg = self.config
-        verdicts = self._verdicts
-        if len(verdicts) < cfg.verdicts:
-            return None
-        off = self.imu_offset
-        offset_s, offset_sd = (
-            (off.lag_s, off.sigma_s)
-            if off is not None and off.sigma_s <= cfg.max_offset_sigma_s
-            else (0.0, 0.0)
-        )
-        signs = set()
-        for v in verdicts:
-            diff = v.lag_s + offset_s - self.lag_in_use_s
-            if v.sigma_s > cfg.max_sigma_s or abs(diff) <= max(
-                self.k_switch * v.sigma_s, cfg.min_change_s
-            ):
-                return None
-            signs.add(diff > 0.0)
-        if len(signs) != 1:
-            return None
-        merged = combine([(v.lag_s, v.sigma_s) for v in verdicts])
-        spread = sum(((v.lag_s - merged.lag_s) / v.sigma_s) ** 2 for v in verdicts)
-        if spread > chi2.isf(cfg.consistency_prob, len(verdicts) - 1):
-            return None
-        lag_s = merged.lag_s + offset_s
-        if not 0.0 <= lag_s <= cfg.max_lag_s:
-            return None
-        self._verdicts.clear()  # handed out once
-        windows = cfg.verdicts * cfg.group_windows
-        return MeasuredLag(lag_s, math.hypot(merged.sigma_s, offset_sd), windows, offset_s)
+        """The lag a chain of verdicts made (module docstring), once; None otherwise."""
+        ready, self._ready = self._ready, None
+        return ready
 
 
-def switch_threshold(false_switch_prob: float, verdicts: int) -> float:
-    """How many of its sigmas each of ``verdicts`` independent verdicts must differ by for
-    a chain of them, all the same way, to pass with probability ``false_switch_prob``
-    when there is nothing to find: ``2 Phi(-k)^verdicts = false_switch_prob``."""
-    return float(norm.isf((0.5 * false_switch_prob) ** (1.0 / verdicts)))
+def switch_threshold(false_switch_prob: float, verdicts: int, looks: int = 1) -> float:
+    """How many of its sigmas each of ``verdicts`` independent verdicts, each looked at up
+    to ``looks`` times, must differ by for a chain of them, all the same way, to pass with
+    probability ``false_switch_prob`` when there is nothing to find (a union bound over the
+    looks): ``2 (looks Phi(-k))^verdicts = false_switch_prob``."""
+    return float(norm.isf((0.5 * false_switch_prob) ** (1.0 / verdicts) / looks))
 
 
 def combine(windows: list[tuple[float, float]]) -> MeasuredLag:
