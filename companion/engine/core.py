@@ -533,9 +533,6 @@ class Engine:
         check = self.imu_innovations
         if check is None or update.reason not in ("", "gate") or update.dof <= 0:
             return []
-        moved = self._noise_watch.moved(self.navigators.primary)
-        if moved:
-            self.self_change(fix.t_s, "noise", moved)
         window = check.on_innovation(
             fix.t_s, update.nis, update.dof, update.gate, self.outage.self_consistent(fix)
         )
@@ -786,6 +783,9 @@ class Engine:
         if probing:
             self.bridge_evidence.before_fusion(meas, blend)  # type: ignore[arg-type]
         update = navs.on_gnss(meas, verdict.gate)
+        moved = self._noise_watch.moved(navs.primary) if update.fused else ""
+        if moved:  # the blend's measured IMU noise (counted and logged)
+            self.self_change(fix.t_s, "noise", moved)
         if probing and update.fused:
             self.bridge_evidence.after_fusion(meas, blend)  # type: ignore[arg-type]
         if probing and verdict.gate:

@@ -18,12 +18,16 @@ integrity monitor sees the service's own change as the receiver's fault.
   cleared, and for one separation window its fix-level failures (the navigator's
   innovation, the potential filter's ellipsoid) are counted and logged, not attributed
   (:meth:`IntegrityMonitor.service_changed`);
-* the outage monitor's rejection clocks start again, and a reset within that window is
-  not alerted (:meth:`OutageMonitor.service_changed`);
+* the outage monitor's rejection clocks start again, and after a change that moved a
+  receiver's fixes a reset within that window is not alerted
+  (:meth:`OutageMonitor.service_changed`);
 * the inertial references, anchored from the navigator as it was, are dropped (they
   re-anchor from the next trusted state);
-* the in-flight grade check's open window of innovations is dropped;
 * the gap-bridge probes straddling the change are dropped.
+
+A change of the measured IMU noise invalidates nothing: the blend's covariance, its gate
+and its innovations' covariance follow it at once (counted and logged, as the IMU stamps'
+offset, which enters only the lag measurement).
 
 Pure: no I/O, no clock.
 """
@@ -50,30 +54,48 @@ class Reseed:
     series: bool
     """The separation series of the receiver concerned (every receiver when none is)."""
     excuse: bool
-    """Fix-level failures within the horizon are the service's own doing."""
+    """Its innovation memory, and its fix-level failures within the horizon are the
+    service's own doing."""
     references: bool
     """The inertial references anchored from the navigator before the change."""
     rejections: bool
-    """The outage monitor's rejection clocks (and its reset alerts within the horizon)."""
-    innovations: bool
-    """The grade check's open window of innovations, and the gap-bridge probes."""
+    """The outage monitor's rejection clocks."""
+    quiet_resets: bool
+    """A reset of the navigator within the horizon is the change's doing (a receiver's
+    fixes moved): not alerted. Not after a reset: a second one says the navigator is
+    still off, which is worth an alert."""
+    probes: bool
+    """The gap-bridge probes straddling the change (:mod:`.bridge_choice`)."""
 
 
+_NOTHING = Reseed(
+    series=False, excuse=False, references=False, rejections=False, quiet_resets=False, probes=False
+)
 RESEEDS: dict[str, Reseed] = {
     # the receiver's fixes placed at other times: everything that compared them before
-    "lag": Reseed(series=True, excuse=True, references=True, rejections=True, innovations=True),
+    "lag": Reseed(
+        series=True, excuse=True, references=True, rejections=True, quiet_resets=True, probes=True
+    ),
     # inside the lag measurement only (added to the lag it hands out): nothing else uses it
-    "stamp": Reseed(
-        series=False, excuse=False, references=False, rejections=False, innovations=False
-    ),
-    # the prediction's covariance from now on: the innovations judged with the old one
-    "noise": Reseed(
-        series=False, excuse=False, references=False, rejections=False, innovations=True
-    ),
+    "stamp": _NOTHING,
+    # the blend's covariance follows it at once, and with it its gate and its innovations'
+    # covariance: the innovations judged before were judged with what was in use then
+    "noise": _NOTHING,
     # the navigation restarted (its own restart re-seeds the rest)
-    "grade": Reseed(series=True, excuse=True, references=True, rejections=True, innovations=True),
-    # the navigator moved to a receiver's fix: what compared the receivers with it
-    "reset": Reseed(series=False, excuse=True, references=True, rejections=True, innovations=True),
+    "grade": Reseed(
+        series=True, excuse=True, references=True, rejections=True, quiet_resets=True, probes=True
+    ),
+    # the navigator moved to a receiver's fix: what compared the receivers with it (not
+    # the grade check's innovations: the prediction's errors before it are evidence about
+    # the IMU)
+    "reset": Reseed(
+        series=False,
+        excuse=True,
+        references=True,
+        rejections=True,
+        quiet_resets=False,
+        probes=True,
+    ),
 }
 """Per kind of self-change, what it invalidates (module docstring)."""
 
@@ -99,19 +121,17 @@ def reseed(engine: Engine, t_s: float, kind: str, text: str, receiver_id: int | 
             series=what.series,
         )
     if what.rejections:
-        engine.outage.service_changed(t_s, receiver_id, horizon_s)
+        engine.outage.service_changed(t_s, receiver_id, horizon_s if what.quiet_resets else 0.0)
     if what.references and engine.coast is not None:
         engine.coast.drop_slots(f"self_change_{kind}")
-    if what.innovations:
+    if what.probes:
         engine.bridge_evidence.reset()
-        if engine.imu_innovations is not None:
-            engine.imu_innovations.restart()
 
 
 class NoiseWatch:
     """Says when the blend's measured IMU noise has moved by more than ``ratio`` (either
-    way) since it last said so: the innovations the grade check averaged were judged with
-    the old noise (``ratio``: the check's own margin, ``min_ratio``)."""
+    way) since it last said so (``ratio``: the grade check's own margin, ``min_ratio``:
+    a change its innovations could see)."""
 
     def __init__(self, ratio: float) -> None:
         self.ratio = ratio
