@@ -125,8 +125,8 @@ TURN = {
 }
 """A MEMS aircraft at 45 m/s banked 13 deg (2.9 deg/s), RTK fixed (15 mm), a receiver
 velocity good to 5 mm/s, HIGHRES_IMU at 100 Hz: in the steady turn (``cruise_turns_deg``
-1440) main's lag measurement switched in 283 ms at 310 s (seed 1), then FAULT, GNSS_LOST
-and a re-initialisation 12.6 m off."""
+1440) the lag measurement before the heading term switched in 281 ms at 310 s (seed 1),
+then FAULT, GNSS_LOST and a re-initialisation 12.6 m off."""
 
 
 def _fly(tmp: Path, turns: tuple[float, ...], lag_s: float, seed: int) -> Flown:
