@@ -185,29 +185,39 @@ def compare_events(
     same: Callable[[Any, Any], tuple[bool, float]],
 ) -> list[Difference]:
     """Two lists of ``[t_s, ...what happened]`` (texts, heartbeat changes): the same
-    number, each the same (``same``) and within ``event_s`` of its time."""
+    number, each the same (``same``) and within ``event_s`` of its time. With a different
+    number, where they part (the first pair beyond tolerance, or the first extra one)."""
     worst: Difference | None = None
-    for i in range(max(len(ref), len(new))):
-        if i >= len(ref) or i >= len(new):
-            extra = new[i] if i >= len(ref) else ref[i]
-            d = Difference(
-                where,
-                extra[0],
-                ref[i][1:] if i < len(ref) else None,
-                new[i][1:] if i < len(new) else None,
-                math.inf,
-                note=f"{len(ref)} vs {len(new)} of them",
-            )
-            return [d]
+    first_bad: Difference | None = None
+    n_beyond = 0
+    for i in range(min(len(ref), len(new))):
         ok, size = same(ref[i][1:], new[i][1:])
         dt = abs(new[i][0] - ref[i][0])
         excess = math.inf if not ok else max(size, dt / event_s if event_s > 0 else math.inf)
-        if excess > 0 and (worst is None or excess > worst.excess):
-            note = f"{dt:.3f} s apart, tolerance {event_s:.3g} s"
-            worst = Difference(where, ref[i][0], ref[i][1:], new[i][1:], excess, note=note)
+        if excess == 0:
+            continue
+        note = f"{dt:.3f} s apart, tolerance {event_s:.3g} s"
+        d = Difference(where, ref[i][0], ref[i][1:], new[i][1:], excess, note=note)
+        if d.fails:
+            n_beyond += 1
+            first_bad = first_bad or d
+        if worst is None or excess > worst.excess:
+            worst = d
+    if len(ref) != len(new):
+        i = min(len(ref), len(new))
+        extra = (new if len(new) > i else ref)[i]
+        part = first_bad or Difference(
+            where,
+            extra[0],
+            ref[i][1:] if i < len(ref) else None,
+            new[i][1:] if i < len(new) else None,
+            math.inf,
+        )
+        note = f"{len(ref)} vs {len(new)} of them; they part here"
+        return [dataclasses.replace(part, excess=math.inf, note=note, values=len(ref))]
     if worst is None:
         return []
-    return [dataclasses.replace(worst, beyond=int(worst.fails), values=len(ref))]
+    return [dataclasses.replace(worst, beyond=n_beyond, values=len(ref))]
 
 
 def _text_event(a: list[Any], b: list[Any]) -> tuple[bool, float]:
