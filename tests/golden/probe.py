@@ -6,7 +6,7 @@
 Another CPU's arithmetic moves a double by about one unit in its last place (2.2e-16
 relative) at each operation. This replays each case with every IMU reading and every
 attitude the autopilot sent multiplied by ``1 + rel * u`` (``u`` uniform in [-1, 1],
-seeded per case): a perturbation of the same kind, a thousand times larger by default,
+seeded per case): a perturbation of the same kind, some 450 times larger by default,
 that reaches every estimate, covariance and test statistic. The outputs are compared
 with the recorded ones by the rules of :mod:`tests.golden.rules`, as
 ``tests/test_replay_golden.py`` compares them. A case beyond tolerance points at a
