@@ -1,4 +1,5 @@
-"""The committed fixtures in sitl_fixtures/ read back with pymavlink, right types and rates."""
+"""The committed fixtures in sitl_fixtures/ read back with pymavlink, right types and rates,
+and are what the simulator flies today."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import pytest
 from pymavlink import mavutil
 
 from companion.sim import make_scenario
+from tests.golden import flights
+from tests.golden.compare import failures, report
 
 FIXTURES = Path(__file__).resolve().parents[2] / "sitl_fixtures"
 REQUIRED = (
@@ -51,17 +54,16 @@ def test_fixture_is_current(name: str) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", REALISTIC)
-def test_realistic_fixture_is_what_the_simulator_flies(name: str) -> None:
-    """A realistic fixture (dropouts, bursts, a reboot: no fixed message count) is exactly
-    the simulator's flight of its scenario, seed 1, byte for byte."""
-    from companion.sim import simulate
-    from companion.sim.writer import tlog_bytes, truth_rows
-
-    flight = simulate(make_scenario(name), 1)
-    assert tlog_bytes(flight) == (FIXTURES / f"{name}.tlog").read_bytes()
-    truth = (FIXTURES / f"{name}.truth.csv").read_text().splitlines()
-    assert truth == truth_rows(flight)
+@pytest.mark.golden
+@pytest.mark.parametrize("name", flights.COMPARED)
+def test_fixture_is_what_the_simulator_flies(name: str, tmp_path: Path) -> None:
+    """A fixture flown again (``companion simulate <name> --seed 1``) is the committed one:
+    its tlog message by message, its truth CSV (formatting included) and its sidecar, at
+    the tolerances of tests/golden/rules.py (another CPU's arithmetic moves the last bits;
+    ``python -m tests.golden.flights`` lists what moved)."""
+    flights.fly(name, tmp_path)
+    differences = flights.compare_flight(FIXTURES, tmp_path, name)
+    assert not failures(differences), report(name, differences)
 
 
 @pytest.mark.slow
