@@ -169,6 +169,7 @@ class Pipeline:
             cfg.coast,
             cfg.baro,
             cfg.imu_innovations,
+            cfg.spoof,
         )
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()
@@ -267,6 +268,7 @@ class Pipeline:
                     measured = lag.take()
                     if measured is not None:
                         frames += self._on_measured_lag(measured, sample.t_s)
+                    self.engine.gnss_lag_sigma_s = self._lag_sigma_s()
             if kind is HeadingCommand:
                 command = self.decoder.take_command()  # left with every HeadingCommand
                 if command is not None:
@@ -406,6 +408,15 @@ class Pipeline:
         if configured > 0.0 or receiver != 0 or self._measured_lag_s is None:
             return configured
         return self._measured_lag_s
+
+    def _lag_sigma_s(self) -> float | None:
+        """How far receiver 0's fixes may be misplaced in time, s: the measured lag's
+        difference from the one in use, or its sigma if larger (None before two windows
+        measured it: the spoofing monitor then assumes its prior)."""
+        m = self.lag.measured() if self.lag is not None else None
+        if m is None or m.windows < 2:
+            return None
+        return max(abs(m.lag_s - self.decoder.gnss.delay_s[0]), m.sigma_s)
 
     def _on_measured_lag(self, m: MeasuredLag, t_s: float) -> list[bytes]:
         """Receiver 0's lag measured: the fixes placed with it unless the configuration

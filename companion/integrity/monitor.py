@@ -39,6 +39,7 @@ from companion.integrity.fde.detector import FaultDetector, FixCheck
 from companion.integrity.protection.alerts import AlertState
 from companion.integrity.protection.levels import ProtectionLevels
 from companion.integrity.protection.limits import AlertLimit, ApproachCategory, FlightPhase
+from companion.integrity.spoof import SpoofConfig, SpoofMonitor
 from companion.nav.baro import BaroReference
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
@@ -59,11 +60,16 @@ class IntegrityMonitor:
     solution covariance is not finite (then integrity is lost).
     """
 
-    def __init__(self, config: IntegrityConfig | None = None) -> None:
+    def __init__(
+        self, config: IntegrityConfig | None = None, spoof: SpoofConfig | None = None
+    ) -> None:
         self.config = config or IntegrityConfig()
         self.stats: Counter[str] = Counter()
         self.fde = FaultDetector(self.config, self.stats)
         """Fault detection and exclusion (per fix)."""
+        self.spoof = SpoofMonitor(spoof)
+        """Receivers moving unlike the IMU (a spoofer that tracks the vehicle), held out
+        until they agree with it again (:mod:`companion.integrity.spoof`)."""
         self.protection = AlertState(self.config, self.stats)
         """Protection levels, integrity and category of the published solution."""
         self.k_h = self.protection.k_h
@@ -73,17 +79,26 @@ class IntegrityMonitor:
         """Forget everything but ``stats`` (autopilot reboot)."""
         self.fde.reset()
         self.protection.reset()
+        self.spoof.reset()
 
     # ------------------------------------------------------------------ fault detection
 
     def exclude(self, receiver_id: int) -> bool:
-        """True when ``receiver_id`` is currently excluded (do not fuse its fixes)."""
-        return self.fde.exclude(receiver_id)
+        """True when ``receiver_id`` is currently excluded (do not fuse its fixes): by fault
+        detection, or held out as spoofed."""
+        return self.fde.exclude(receiver_id) or self.spoof.excluded(receiver_id)
+
+    def shown_wrong(self, receiver_id: int) -> bool:
+        """True while ``receiver_id`` is excluded on independent evidence (another
+        receiver, a reference, the IMU's drag test): the navigator must not be reset to it
+        on its own self-consistency."""
+        return self.fde.shown_wrong(receiver_id) or self.spoof.excluded(receiver_id)
 
     @property
     def fault_detected(self) -> bool:
-        """True while a fault is unresolved or any receiver is excluded."""
-        return self.fde.fault_detected
+        """True while a fault is unresolved, any receiver is excluded or one is held out
+        as spoofed."""
+        return self.fde.fault_detected or bool(self.spoof.episodes)
 
     @property
     def fault_unresolved(self) -> bool:
@@ -179,4 +194,10 @@ class IntegrityMonitor:
             return []
         fde = self.fde
         fde.advance(t)
-        return self.protection.update(solution, landed, fde.fault_unresolved, fde.fault_detected)
+        return self.protection.update(
+            solution,
+            landed,
+            fde.fault_unresolved,
+            self.fault_detected,
+            hpl_floor_m=self.spoof.hpl_floor_m(),
+        )
