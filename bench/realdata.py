@@ -6,8 +6,15 @@ README there): the converted ``<folder>.tlog`` is replayed with the default conf
 is scored with :func:`companion.evaluate.against_input.evaluate_against_input` (the code
 path of ``companion evaluate OUT --against-input IN``; rules in that module). Prints one
 table, a row per flight and a column per acceptance figure with its PASS/FAIL mark
-("-": not applicable), then a row per GNSS gap. A folder without its tlog, or the whole
-data folder absent, is skipped with the reason.
+("-": not applicable), then a row per GNSS gap, then a row per real event (a whole-stream
+dropout, a GNSS gap, no GNSS at start: found in the log's own timestamps,
+:mod:`companion.evaluate.events_said`) with the alerts that said its start and its end.
+Two columns come from that module: ``txt/min``, the service's texts a minute of log
+(PASS at most :data:`TEXTS_PER_MINUTE_MAX`; the most in any minute beside it, real
+changes included), and ``events said``, the real events whose start and whose end the
+service said (to compare between two versions of the code: one event, one alert and one
+return). A folder without its tlog, or the whole data folder absent, is skipped with the
+reason.
 
 Other rows (another data set scored its own way) join the table as dicts of
 column -> cell: append them to the list :func:`main` passes to :func:`print_table`.
@@ -19,6 +26,7 @@ Progress goes to stderr.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import json
 import logging
@@ -34,10 +42,14 @@ sys.path.insert(0, str(ROOT))
 from companion.config import load_config  # noqa: E402
 from companion.evaluate.against_input import evaluate_against_input  # noqa: E402
 from companion.evaluate.against_input_report import GAP_HEADER, gap_line  # noqa: E402
+from companion.evaluate.events_said import EventsSaid, events_said  # noqa: E402
 from companion.replay import replay  # noqa: E402
 
 FLIGHTS_DIR = ROOT.parent / "shared" / "realdata" / "flights"
 BAR_WIDTH = 30
+TEXTS_PER_MINUTE_MAX = 6.0
+"""Texts a minute of log the service may send on average (a log shorter than a minute
+counts as one)."""
 
 
 def progress(done_bytes: int, total_bytes: int, label: str, t0: float) -> None:
@@ -64,13 +76,24 @@ def run_flight(folder: Path, out_dir: Path) -> dict[str, Any]:
     summary = replay(tlog, out, config)
     t1 = time.perf_counter()
     result = evaluate_against_input(out, tlog, config.decoder)
+    events = events_said(out, tlog, config.decoder)
     t2 = time.perf_counter()
     return {
         "flight": folder.name,
         "result": result,
+        "events": events,
         "replay_s": t1 - t0,
         "evaluate_s": t2 - t1,
         "log_s": summary.log_duration_s,
+    }
+
+
+def events_cells(ev: EventsSaid) -> dict[str, str]:
+    """The texts a minute (marked) and the real events said, as table cells."""
+    mark = "PASS" if ev.per_minute <= TEXTS_PER_MINUTE_MAX else "FAIL"
+    return {
+        "txt/min": f"{ev.per_minute:.1f} (max {ev.max_in_window}) {mark}",
+        "events said": ev.cell(),
     }
 
 
@@ -160,8 +183,9 @@ def main(argv: list[str] | None = None) -> int:
         if "skipped" in run:
             rows.append({"flight": run["flight"], "wrong>25m": f"skipped: {run['skipped']}"})
             continue
-        row = {"flight": run["flight"], **run["result"].row()}
-        row["all"] = "PASS" if run["result"].passed else "FAIL"
+        row = {"flight": run["flight"], **run["result"].row(), **events_cells(run["events"])}
+        texts_ok = run["events"].per_minute <= TEXTS_PER_MINUTE_MAX
+        row["all"] = "PASS" if run["result"].passed and texts_ok else "FAIL"
         rows.append(row)
     # other data sets' rows (dicts of column -> cell) are appended here
     # the walk beside the real flights folder (not with another --flights folder)
@@ -177,6 +201,20 @@ def main(argv: list[str] | None = None) -> int:
     for run in runs:
         for g in getattr(run.get("result"), "gaps", ()):
             print(f"  {run['flight']:<38}" + gap_line(g)[2:])
+    print()
+    print(
+        "Real events (s from the log's start; start: the alert that said it and its latency,"
+        " 'already': a loss was being said; end: the return that said it)"
+    )
+    print(f"  {'flight':<38}{'event':<10}{'start':>8}{'length':>8}  {'start said':<22}end said")
+    for run in runs:
+        for e in getattr(run.get("events"), "events", ()):
+            length = "open" if e.end_s is None else f"{e.end_s - e.start_s:.1f}"
+            by = "none" if e.start_said_by is None else e.start_said_by
+            if e.start_latency_s is not None and e.start_said_by != "already":
+                by += f" {e.start_latency_s:.1f} s"
+            end = "-" if e.end_s is None else (e.end_said_by or "none")
+            print(f"  {run['flight']:<38}{e.kind:<10}{e.start_s:8.1f}{length:>8}  {by:<22}{end}")
     n_scored = sum("result" in r for r in runs)
     print()
     print(
@@ -196,6 +234,7 @@ def main(argv: list[str] | None = None) -> int:
                         "evaluate_s": r["evaluate_s"],
                         "log_s": r["log_s"],
                         **r["result"].to_dict(),
+                        "events_said": dataclasses.asdict(r["events"]),
                     }
                 ),
             }

@@ -63,7 +63,7 @@ from companion.mavlink.px4_agp import Px4AgpSetup
 from companion.mavlink.streams import RateMonitor, select_streams, stream_requests
 from companion.params import LIVE_KEYS, ParamServer
 from companion.raw.link import RawLink
-from companion.raw.obs import NavWords, PvtFix, RawEpoch
+from companion.raw.obs import NavWords, PvtFix, RawEpoch, ReceiverStatus
 from companion.types import (
     Alert,
     AlertCode,
@@ -72,6 +72,7 @@ from companion.types import (
     CommandOutcome,
     CommandResult,
     GnssFix,
+    GnssSignalReport,
     HeadingCommand,
     HeartbeatSample,
     ImuSample,
@@ -215,17 +216,22 @@ class Pipeline:
             self.raw = RawLink(self.config.raw)
         return self.raw
 
-    def on_raw(self, item: RawEpoch | NavWords | PvtFix, t_rx_s: float) -> list[bytes]:
+    def on_raw(
+        self, item: RawEpoch | NavWords | PvtFix | ReceiverStatus, t_rx_s: float
+    ) -> list[bytes]:
         """One message of the raw receiver (decoded at the edge); return the frames to send:
         its carrier-phase solution goes to the engine (the integrity monitor's redundant
-        solution), FIS-RAIM's alerts and the ``CMP_R*`` values are published."""
+        solution), as do its interference reports (the receiver's own indicators, the
+        signal tests); FIS-RAIM's alerts and the ``CMP_R*`` values are published."""
         link = self.enable_raw()
         return self._raw_outputs(link.on_item(item, t_rx_s))
 
-    def _raw_outputs(self, outputs: Sequence[RawSolution | Output]) -> list[bytes]:
+    def _raw_outputs(
+        self, outputs: Sequence[RawSolution | GnssSignalReport | Output]
+    ) -> list[bytes]:
         frames: list[bytes] = []
         for out in outputs:
-            if isinstance(out, RawSolution):
+            if isinstance(out, (RawSolution, GnssSignalReport)):
                 frames += [f for o in self.engine.handle(out) for f in self._encode(o)]
             elif isinstance(out, Alert):
                 self.engine.stats.alerts[out.code.value] += 1

@@ -37,9 +37,9 @@ from companion.mavlink.decode import LIGHT_MESSAGE_IDS
 from companion.mavlink.logs import open_flight_log
 from companion.mavlink.tlog import TlogError, TlogWriter, describe_file
 from companion.pipeline import Pipeline
-from companion.raw.obs import NavWords, PvtFix, RawEpoch
+from companion.raw.obs import NavWords, PvtFix, RawEpoch, ReceiverStatus
 
-RawItem = RawEpoch | NavWords | PvtFix
+RawItem = RawEpoch | NavWords | PvtFix | ReceiverStatus
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +93,8 @@ class ReplaySummary:
 def timed_raw_items(items: Iterable[RawItem], delay_s: float = 0.0) -> list[tuple[float, RawItem]]:
     """A raw receiver's messages in stream order with the UNIX time each is fed at: the
     navigation words first (time ``-inf``), an epoch and its NAV-PVT at the epoch's GPS
-    time as UTC plus ``delay_s`` (a NAV-PVT before any epoch is dropped: no week)."""
+    time as UTC plus ``delay_s`` (a NAV-PVT before any epoch is dropped: no week); a
+    receiver status without a time of its own (MON-RF, MON-HW) at the newest epoch's."""
     words: list[tuple[float, RawItem]] = []
     timed: list[tuple[float, RawItem]] = []
     week: int | None = None
@@ -106,8 +107,9 @@ def timed_raw_items(items: Iterable[RawItem], delay_s: float = 0.0) -> list[tupl
             tow_s = item.tow_s
         elif week is None:
             continue
-        else:
+        elif item.itow_s is not None:
             tow_s = item.itow_s
+        # else a receiver status without a time (MON-RF, MON-HW): the newest epoch's
         utc_s = GPS_EPOCH_UNIX_S + week * SECONDS_PER_WEEK + tow_s - GPS_UTC_LEAP_S
         timed.append((utc_s + delay_s, item))
     timed.sort(key=lambda pair: pair[0])  # stable: an epoch before its NAV-PVT
@@ -142,7 +144,9 @@ def replay(
     """
     # the decoder is the only consumer of the messages: light messages where it takes them;
     # a DataFlash .bin or a PX4 .ulg (by content) is read as the streams its .tlog holds
-    reader = open_flight_log(in_path, light_ids=LIGHT_MESSAGE_IDS)
+    # a telemetry log is parsed with the dialect the service parses its links with
+    dialect = (config or Config()).encoder.dialect
+    reader = open_flight_log(in_path, light_ids=LIGHT_MESSAGE_IDS, dialect=dialect)
     prefix = getattr(reader, "stats_prefix", "tlog_")
     records = iter(reader)
     first_record = next(records, None)

@@ -68,7 +68,7 @@ from companion.notify import SystemdNotifier
 from companion.params import load_overrides, saved_form
 from companion.pipeline import Pipeline
 from companion.raw.link import RawConfig
-from companion.raw.obs import NavWords, PvtFix, RawEpoch
+from companion.raw.obs import NavWords, PvtFix, RawEpoch, ReceiverStatus
 from companion.recorder import Recorder
 from companion.ubx.reader import UbxSource
 
@@ -536,7 +536,7 @@ class Service:
             await asyncio.sleep(max(sleep_s, 0.0))
 
 
-RawEntry = tuple[float, RawEpoch | NavWords | PvtFix] | None
+RawEntry = tuple[float, RawEpoch | NavWords | PvtFix | ReceiverStatus] | None
 """A raw receiver's message with its receive time; None when the reading ended."""
 
 

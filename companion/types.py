@@ -124,7 +124,6 @@ class AlertCode(enum.Enum):
     RTK_LOST = "RTK_LOST"
     RTK_BACK = "RTK_BACK"
     GNSS_STALE = "GNSS_STALE"
-    BRIDGING = "BRIDGING"
     GNSS_BACK = "GNSS_BACK"
     GNSS_SLOW = "GNSS_SLOW"
     GNSS_STEADY = "GNSS_STEADY"
@@ -401,9 +400,13 @@ class GnssSignalReport:
     receiver itself, the autopilot (GNSS_INTEGRITY, PX4's GPS flags) or the raw link's own
     tests (C/N0, clock, Doppler) say about jamming and spoofing.
 
-    ``source`` names who says it (``"autopilot"``, ``"raw"``); ``jam_indicator`` is the
-    receiver's jamming indicator scaled to 0..1 (None: not given); ``evidence`` short
-    human-readable reasons (``"C/N0 spread 0.6 dB-Hz over 9 sats"``) for the alert text.
+    ``source`` names who says it: ``"autopilot"`` (the receiver's own flags relayed by
+    the autopilot), ``"receiver"`` (the receiver's own indicators read on the raw link),
+    ``"raw"`` (the raw link's own signal tests); the first two are the receiver's own
+    verdict (:mod:`companion.integrity.signal`). ``jam_indicator`` is the receiver's
+    jamming indicator scaled to 0..1 (None: not given); ``evidence`` short
+    human-readable reasons (``"C/N0 spread 0.6 dB-Hz over 9 sats"``) for the alert text,
+    of which ``spoofing_evidence`` are those about spoofing (the rest are about jamming).
     """
 
     t_s: float
@@ -413,6 +416,7 @@ class GnssSignalReport:
     spoofing: InterferenceState = InterferenceState.UNKNOWN
     jam_indicator: float | None = None
     evidence: tuple[str, ...] = ()
+    spoofing_evidence: tuple[str, ...] = ()
 
 
 Sample = (

@@ -116,12 +116,21 @@ def test_a_straight_line_is_carried_through_a_gap(navigator):
         assert max(e for t, e in errors.items() if t < 10.15) < 1e-3
 
 
+GNSS_AND_DATA_CODES = frozenset(
+    {AlertCode.NO_GNSS, AlertCode.GNSS_LOST, AlertCode.GNSS_BACK, AlertCode.NO_DATA}
+    | {AlertCode.DATA_BACK, AlertCode.RTK_LOST, AlertCode.RTK_BACK, AlertCode.GNSS_STALE}
+)
+"""What the service says of its receivers and data streams (not CAT, INTEGRITY ...)."""
+
+
 def test_gap_raises_lost_then_back():
     _, outs = run(line_stream(30.0, gaps=((10.0, 20.0),)))
     lost = alerts(outs, AlertCode.GNSS_LOST)
     back = alerts(outs, AlertCode.GNSS_BACK)
     assert len(lost) == 1 and lost[0].text.endswith(": bridging")
-    assert not alerts(outs, AlertCode.BRIDGING)  # one alert per gap
+    # one alert per gap and one return: nothing else is said of the GNSS or the data
+    said = [o.code for o in outs if isinstance(o, Alert) and o.code in GNSS_AND_DATA_CODES]
+    assert said == [AlertCode.GNSS_LOST, AlertCode.GNSS_BACK]
     assert 20.9 < lost[0].t_s < 21.2  # 1 s timeout after the last fix at t0 + 9.9 s
     assert len(back) == 1 and 30.0 <= back[0].t_s < 30.5
     outg = [o.value for o in outs if isinstance(o, NamedValue) and o.name == "CMP_OUTG"]

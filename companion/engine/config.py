@@ -113,7 +113,8 @@ class EngineConfig:
     """No IMU, attitude or GNSS sample from the autopilot for this long is a silence:
     ``NO_DATA``, no position published, and the navigation restarts from the first fix
     after it (``DATA_BACK``). Far above the gaps of a live stream (10-50 Hz), twice those
-    of a 1 Hz telemetry recording."""
+    of a 1 Hz telemetry recording. Sooner when the GNSS loss falls due while every stream
+    is stalled (:mod:`companion.engine.silence`): ``NO_DATA`` then says the loss."""
     silence_intervals: float = ranged(2.0, ge=1.0)
     """A link whose data samples come with longer pauses (a ground station's 1 Hz
     telemetry) is silent only after this many times the longest of its recent pauses

@@ -17,6 +17,10 @@ What it does with a sample:
   kept; while its own FIS-RAIM trusts it, it goes to the integrity monitor with each
   fix as the reference ``ref:tdprp`` of the separation tests. Its time is mapped from
   GPS time at the edge: it does not move the engine's clock.
+* A :class:`~companion.types.GnssSignalReport` (the receiver's own jamming and spoofing
+  flags, the raw link's signal tests) goes to the signal monitor
+  (:mod:`companion.integrity.signal`: ``JAM``, the spoofing evidence), which also fills
+  the published integrity report's jamming and spoofing states; it moves no clock.
 * As soon as a fix has been fused (``publish_on_fix``), the navigator's state is
   carried to ``now_s`` and published as a :class:`NavSolution`
   (:mod:`companion.engine.publish`): the solution with that fix in it leaves at once,
@@ -58,6 +62,7 @@ from companion.engine.silence import StreamWatch
 from companion.engine.tilt_aiding import TiltAiding
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
+from companion.integrity.signal import SignalMonitor
 from companion.integrity.spoof import SpoofConfig
 from companion.nav.baro import BaroConfig, BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
@@ -81,9 +86,11 @@ from companion.types import (
     BaroSample,
     FixType,
     GnssFix,
+    GnssSignalReport,
     HeadingCommand,
     HeartbeatSample,
     ImuSample,
+    IntegrityReport,
     LandedState,
     LandedStateSample,
     NavMode,
@@ -226,6 +233,9 @@ class Engine:
         """The link's rhythm of fixes (slow or not): the link's, kept across restarts."""
         self._publish_rate_hz = self.config.publish_rate_hz
         self.stats = EngineStats()
+        self.signal = SignalMonitor()
+        """Signal-level interference: JAM, and each receiver's spoofing evidence
+        (:mod:`companion.integrity.signal`); kept across autopilot reboots."""
         self._handlers: dict[type, Callable[[object], list[Output]]] = {
             ImuSample: self._on_imu,  # type: ignore[dict-item]
             AttitudeSample: self._on_attitude,  # type: ignore[dict-item]
@@ -352,11 +362,16 @@ class Engine:
             # autopilot's own: it does not move the engine's clock
             self._raw = sample  # type: ignore[assignment]
             return []
+        if kind is GnssSignalReport:  # neither does a raw receiver's report
+            alerts: list[Output] = list(self.signal.on_report(sample))  # type: ignore[arg-type]
+            self._account(alerts)
+            return alerts
         t_s = sample.t_s
         watch = self.watch
         resumed: list[Output] = []
         if kind in _DATA_KINDS:
-            silence_s = watch.on_data(t_s)
+            # a data kind (IMU, attitude, fix): each carries its arrival time
+            silence_s = watch.on_data(t_s, sample.t_rx_s)  # type: ignore[union-attr]
             if silence_s is not None:
                 resumed = self._after_silence(t_s, silence_s)
         elif kind is RebootEvent and watch.silent:
@@ -434,7 +449,8 @@ class Engine:
     def _gap_started(self, alerts: list[Alert]) -> list[Alert]:
         """At a GNSS loss, choose the bridge's motion model on the evidence (inertial
         prediction or constant velocity, :mod:`.bridge_choice`); the loss alert says which
-        when it is constant velocity."""
+        when it is constant velocity. A loss while every stream is silent or stalled is
+        said by the silence's ``NO_DATA`` (:mod:`.silence`)."""
         if not alerts:
             return alerts
         out: list[Alert] = []
@@ -456,6 +472,10 @@ class Engine:
                     # (a slow link's GNSS timeout may outlast its silence timeout)
                     self.stats.gnss["loss_in_silence"] += 1
                     continue
+                if self.watch.stalled(alert.t_s, self.outage.median_fix_interval_s):
+                    # every stream stopped, GNSS with them: one alert, the silence's
+                    self.stats.gnss["loss_in_silence"] += 1
+                    alert = self.watch.announce(alert.t_s)
             out.append(alert)
         return out
 
@@ -470,9 +490,12 @@ class Engine:
         return [Alert(t_s, AlertCode.DATA_BACK, Severity.NOTICE, text)]
 
     def _account(self, outputs: list[Output]) -> None:
-        """Count the alerts among ``outputs``; a heading change moves the navigators."""
-        for out in outputs:
-            if isinstance(out, Alert):
+        """Count the alerts among ``outputs``; a heading change moves the navigators; an
+        integrity report gets the signal monitor's jamming and spoofing verdicts."""
+        for i, out in enumerate(outputs):
+            if type(out) is IntegrityReport:
+                outputs[i] = self.signal.stamp(out)
+            elif isinstance(out, Alert):
                 self.stats.alerts[out.code.value] += 1
                 if out.code in _HEADING_CODES:
                     self.state_changes += 1

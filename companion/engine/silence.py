@@ -14,6 +14,13 @@ the engine their estimate of it, :meth:`companion.engine.Engine.on_clock`):
   HEARTBEAT: a stopped stream is not a dead autopilot); the first data sample after
   it ends it with ``DATA_BACK`` and the engine restarts its navigation from the next
   usable fix (nothing is carried across a silence).
+* **stalled**: when the GNSS loss falls due while every stream has been quiet longer
+  than any of the link's recent pauses and longer than the receiver's usual interval
+  between fixes (:meth:`StreamWatch.stalled`), the fixes are missing because
+  everything is: the silence starts then, said by ``NO_DATA`` instead of the loss
+  (:meth:`StreamWatch.announce`), so that a whole-stream dropout is one alert and one
+  return (``DATA_BACK``) within the GNSS timeout, not ``GNSS_LOST``, ``NO_DATA`` and
+  ``DATA_BACK``.
 * **no GNSS**: the navigation has not started (no usable fix fused) ``no_gnss_alert_s``
   after the first sample of this boot (or after a silence): ``NO_GNSS``, repeated
   every ``no_gnss_repeat_s`` while it lasts; ``GNSS_BACK`` when the first fix starts
@@ -35,6 +42,47 @@ DATA_INTERVALS_KEPT = 200
 longest sets the silence timeout."""
 
 
+class SlidingMax:
+    """The largest of the last ``size`` values pushed (0 before any): a queue of the
+    values not smaller than any pushed after them, with their order numbers."""
+
+    __slots__ = ("size", "_n", "_queue")
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._n = 0
+        self._queue: deque[tuple[int, float]] = deque()
+
+    def push(self, value: float) -> float:
+        """Keep ``value``; the largest of the last ``size``."""
+        n = self._n
+        self._n = n + 1
+        queue = self._queue
+        while queue and queue[-1][1] <= value:
+            queue.pop()
+        queue.append((n, value))
+        if queue[0][0] <= n - self.size:
+            queue.popleft()
+        return queue[0][1]
+
+    @property
+    def value(self) -> float:
+        """The largest of the last ``size`` values (0 before any)."""
+        return self._queue[0][1] if self._queue else 0.0
+
+    @property
+    def full(self) -> bool:
+        """``size`` values were pushed: :attr:`value` is over a whole window."""
+        return self._n >= self.size
+
+    def copy(self) -> SlidingMax:
+        """An independent copy."""
+        other = SlidingMax(self.size)
+        other._n = self._n
+        other._queue = deque(self._queue)
+        return other
+
+
 class StreamWatch:
     """The silence and no-GNSS states of one autopilot boot (see the module docstring)."""
 
@@ -49,8 +97,12 @@ class StreamWatch:
         self.silence_timeout_s = silence_timeout_s
         self.silence_intervals = silence_intervals
         self.silence_timeout_max_s = silence_timeout_max_s
-        self._n_pauses = 0
-        self._longest_queue: deque[tuple[int, float]] = deque()
+        self._pauses = SlidingMax(DATA_INTERVALS_KEPT)
+        """Pauses between data samples' times that were no silence (autopilot clock)."""
+        self._arrival_pauses = SlidingMax(DATA_INTERVALS_KEPT)
+        """... and between their arrivals (the driver's clock, on which a silence is
+        watched: a link that delivers in bursts pauses longer there)."""
+        self._last_rx_s: float | None = None
         self._timeout_s = silence_timeout_s
         self._longest_s = 0.0
         self.gnss_timeout_s = 0.0
@@ -61,7 +113,8 @@ class StreamWatch:
         self.last_data_t_s: float | None = None
         """Time of the newest navigation data sample (s, autopilot clock)."""
         self.silent = False
-        """True from ``NO_DATA`` until the next data sample."""
+        """True from ``NO_DATA`` until the next data sample (which restarts the
+        navigation, however short the silence was)."""
         self._wait_start_t_s: float | None = None
         """Start of the wait for a first usable fix (first sample, or the end of a silence);
         None once the navigation runs."""
@@ -86,15 +139,21 @@ class StreamWatch:
         last = self.last_data_t_s
         return 0.0 if last is None else t_s - last
 
-    def on_data(self, t_s: float) -> float | None:
-        """A navigation data sample at ``t_s``. Returns the length of the silence it ends
-        (s; a gap of at least ``silence_timeout_s``, announced or not), else None."""
+    def on_data(self, t_s: float, t_rx_s: float | None = None) -> float | None:
+        """A navigation data sample at ``t_s``, received at ``t_rx_s`` (the driver's clock,
+        s; None: unknown). Returns the length of the silence it ends (s; one announced by
+        ``NO_DATA``, or a gap of at least the timeout, announced or not), else None."""
         gap = self.gap_s(t_s)
         ended = self.silent or (self.last_data_t_s is not None and gap >= self.timeout_s)
         if self.last_data_t_s is None or t_s > self.last_data_t_s:
             if self.last_data_t_s is not None and not ended:
                 self._pause(gap)
             self.last_data_t_s = t_s
+        last_rx = self._last_rx_s
+        if t_rx_s is not None and (last_rx is None or t_rx_s > last_rx):
+            if last_rx is not None and not ended:
+                self._arrival_pauses.push(t_rx_s - last_rx)
+            self._last_rx_s = t_rx_s
         if not ended:
             return None
         self.silent = False
@@ -106,30 +165,47 @@ class StreamWatch:
         return max(self._timeout_s, self.gnss_timeout_s)
 
     def _pause(self, gap_s: float) -> None:
-        """A pause between data samples that was no silence: the timeout follows the
-        longest of the last :data:`DATA_INTERVALS_KEPT` (a sliding maximum: a queue of
-        the pauses not shorter than any after them)."""
-        cap = self.silence_timeout_max_s
-        if cap <= self.silence_timeout_s:
-            return
-        n = self._n_pauses
-        self._n_pauses = n + 1
-        queue = self._longest_queue
-        while queue and queue[-1][1] <= gap_s:
-            queue.pop()
-        queue.append((n, gap_s))
-        if queue[0][0] <= n - DATA_INTERVALS_KEPT:
-            queue.popleft()
-        longest = queue[0][1]
+        """A pause between data samples that was no silence: kept as the longest of the
+        last :data:`DATA_INTERVALS_KEPT` (a sliding maximum: a queue of the pauses not
+        shorter than any after them), which the timeout follows."""
+        longest = self._pauses.push(gap_s)
         if longest == self._longest_s:
             return
         self._longest_s = longest
-        self._timeout_s = max(self.silence_timeout_s, min(cap, self.silence_intervals * longest))
+        cap = self.silence_timeout_max_s
+        if cap > self.silence_timeout_s:
+            self._timeout_s = max(
+                self.silence_timeout_s, min(cap, self.silence_intervals * longest)
+            )
+
+    def stalled(self, t_s: float, fix_interval_s: float) -> bool:
+        """Has every stream been quiet at ``t_s`` longer than any of the link's last
+        :data:`DATA_INTERVALS_KEPT` pauses (between the samples' times and between their
+        arrivals) and than ``fix_interval_s`` (the receiver's usual interval between
+        fixes, s)? A GNSS loss due then is the stream's, not the receiver's: the
+        receiver's fixes stopped with everything else. False until a whole window of
+        pauses was seen: before, the link's usual pauses (a radio's delivery bursts)
+        are not known."""
+        last = self.last_data_t_s
+        if last is None or self.silent:
+            return False
+        pauses, arrivals = self._pauses, self._arrival_pauses
+        if not (pauses.full and (arrivals.full or self._last_rx_s is None)):
+            return False
+        usual = max(pauses.value, arrivals.value, fix_interval_s)
+        return t_s - last > usual
+
+    def announce(self, t_s: float) -> Alert:
+        """The silence starts at ``t_s``: ``NO_DATA`` (the first data sample after it
+        ends it, :meth:`on_data`)."""
+        self.silent = True
+        text = f"no IMU, attitude, GNSS for {self.gap_s(t_s):.1f} s"
+        return Alert(t_s, AlertCode.NO_DATA, Severity.CRITICAL, text)
 
     def keep_pauses(self, other: StreamWatch) -> None:
         """Take ``other``'s recent pauses and timeout: the link's, not one boot's."""
-        self._n_pauses = other._n_pauses
-        self._longest_queue = deque(other._longest_queue)
+        self._pauses = other._pauses.copy()
+        self._arrival_pauses = other._arrival_pauses.copy()
         self._longest_s = other._longest_s
         self._timeout_s = max(self.silence_timeout_s, other._timeout_s)
 
@@ -169,9 +245,7 @@ class StreamWatch:
         alerts: list[Alert] = []
         last = self.last_data_t_s
         if not self.silent and last is not None and t_s - last >= self.timeout_s:
-            self.silent = True
-            text = f"no IMU, attitude, GNSS for {t_s - last:.1f} s"
-            alerts.append(Alert(t_s, AlertCode.NO_DATA, Severity.CRITICAL, text))
+            alerts.append(self.announce(t_s))
         if t_s >= self.no_gnss_due_s and self._wait_start_t_s is not None:
             waited = t_s - self._wait_start_t_s
             self.no_gnss_announced += 1

@@ -47,8 +47,8 @@ False alerts
     An alert whose code is in :data:`FALSE_ALERT_CODES` (GNSS_LOST, RTK_LOST, GNSS_STALE,
     FAULT, INTEGRITY) is false when it lies outside every event window extended by the same
     tolerance and grace, whatever the event's kind (a protection level may legitimately
-    exceed its limit during an outage). GNSS_BACK, RTK_BACK, BRIDGING, CAT and HDG_* are status
-    reports, never false alerts.
+    exceed its limit during an outage). GNSS_BACK, RTK_BACK, CAT and HDG_* (and BRIDGING of
+    older replays) are status reports, never false alerts.
 Heading
     ``HDG_READY`` carries the mismatch ``INS heading - GNSS track`` (Markelov et al.), the
     value the service subtracts from its INS heading. With the sidecar's ``heading_error_deg`` (INS

@@ -184,12 +184,14 @@ TEXT_MAX_PER_WINDOW = 6
 REAL_CHANGE_CODES: frozenset[str] = frozenset(
     {"GNSS_LOST", "BRIDGING", "GNSS_BACK", "NO_DATA", "DATA_BACK"}
 )
-"""Alerts that announce a loss or a return: a real change when the input shows one."""
+"""Alerts that announce a loss or a return: a real change when the input shows one
+(BRIDGING: retired, in older replays)."""
 PARKED_SPEED_MPS = 0.5
 PARKED_MIN_S = 10.0
 LOSS_ALERT_CODES: frozenset[str] = frozenset({"GNSS_LOST", "BRIDGING", "NO_GNSS", "NO_DATA"})
-"""Alerts that say GNSS is gone (docs/mavlink.md): GNSS_LOST, raised with BRIDGING; NO_GNSS
-(no fix has started the navigation); NO_DATA (every stream stopped, GNSS with them)."""
+"""Alerts that say GNSS is gone (docs/mavlink.md): GNSS_LOST (BRIDGING, retired, in older
+replays); NO_GNSS (no fix has started the navigation); NO_DATA (every stream stopped, GNSS
+with them)."""
 BACK_ALERT_CODES: frozenset[str] = frozenset({"GNSS_BACK"})
 SLOW_ALERT_CODE = "GNSS_SLOW"
 STEADY_ALERT_CODE = "GNSS_STEADY"

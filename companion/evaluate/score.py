@@ -41,7 +41,7 @@ MISMATCH_MEDIAN_DISTANCE_M = 50_000.0
 truth belongs to another flight ("mismatched truth"), m."""
 
 EVENT_ALERT_CODES: Mapping[str, tuple[str, ...]] = {
-    "outage": ("GNSS_LOST",),
+    "outage": ("GNSS_LOST", "NO_DATA"),  # NO_DATA: the fixes stopped with every stream
     "rtk_outage": ("RTK_LOST",),
     "downgrade": ("RTK_LOST", "GNSS_LOST"),
     "stale": ("GNSS_STALE",),

@@ -52,8 +52,17 @@ import numpy as np
 from companion.nav.frames import ecef_to_geodetic, geodetic_to_ecef_m
 from companion.ranges import check_ranges, ranged
 from companion.raw.inav import InavCollector
+from companion.raw.interference import InterferenceReports
 from companion.raw.lnav import Ephemeris, LnavCollector
-from companion.raw.obs import ALL_BANDS, L1_BANDS, NavWords, PvtFix, RawEpoch, SignalObs
+from companion.raw.obs import (
+    ALL_BANDS,
+    L1_BANDS,
+    NavWords,
+    PvtFix,
+    RawEpoch,
+    ReceiverStatus,
+    SignalObs,
+)
 from companion.raw.raim import FisRaim, FisRaimConfig, FisRaimResult
 from companion.raw.tdprp import Tdprp, TdprpConfig, TrackPoint
 from companion.types import (
@@ -61,6 +70,7 @@ from companion.types import (
     AlertCode,
     FloatArray,
     GnssFix,
+    GnssSignalReport,
     NamedValue,
     Output,
     RawSolution,
@@ -69,8 +79,9 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
-RawOutput = RawSolution | Output
-"""What the link passes on: solutions for the engine, alerts and values to publish."""
+RawOutput = RawSolution | GnssSignalReport | Output
+"""What the link passes on: solutions and interference reports for the engine, alerts and
+values to publish."""
 
 BANDS = ("all", "l1")
 """``[raw] bands``: every frequency the package decodes, or L1/E1 only."""
@@ -232,16 +243,26 @@ class RawLink:
         self.anchors = 0
         """Epochs 0 taken."""
         self.last: RawSolution | None = None
+        self.interference = InterferenceReports(cfg.receiver_id)
+        """The receiver's own interference indicators and the signal tests of each epoch
+        (:mod:`companion.raw.interference`), as reports for the engine."""
 
     # ------------------------------------------------------------------ input
 
-    def on_item(self, item: RawEpoch | NavWords | PvtFix, t_rx_s: float) -> list[RawOutput]:
-        """One decoded receiver message; solutions, alerts and status values to pass on."""
+    def on_item(
+        self, item: RawEpoch | NavWords | PvtFix | ReceiverStatus, t_rx_s: float
+    ) -> list[RawOutput]:
+        """One decoded receiver message; solutions, interference reports, alerts and status
+        values to pass on."""
         if isinstance(item, NavWords):
             self._on_nav(item)
             return []
         if isinstance(item, PvtFix):
             return self._on_pvt(item)
+        if isinstance(item, ReceiverStatus):
+            tow = item.itow_s if item.itow_s is not None else self._last_tow_s
+            t_s = None if tow is None else self.clock.to_autopilot_s(tow)
+            return list(self.interference.on_status(item, t_s))
         return self._on_epoch(item, t_rx_s)
 
     def on_fix(self, fix: GnssFix) -> list[Output]:
@@ -343,6 +364,13 @@ class RawLink:
         self._anchor_t_s = None
 
     def _process(self, epoch: RawEpoch, pvt: PvtFix | None, t_rx_s: float) -> list[RawOutput]:
+        """The signal tests' report of the epoch, then its carrier-phase solution."""
+        t_s = self.clock.to_autopilot_s(pvt.itow_s if pvt is not None else epoch.tow_s)
+        reports: list[RawOutput] = []
+        reports += self.interference.on_epoch(epoch, pvt, t_s, self.ephemerides)
+        return reports + self._solve(epoch, pvt, t_rx_s)
+
+    def _solve(self, epoch: RawEpoch, pvt: PvtFix | None, t_rx_s: float) -> list[RawOutput]:
         cfg = self.config
         last = self._last_tow_s
         if epoch.clock_reset:
@@ -526,4 +554,5 @@ class RawLink:
         total.update({f"GPS: {k}": v for k, v in self._lnav.rejected.items()})
         total.update({f"Galileo: {k}": v for k, v in self._inav.rejected.items()})
         total.update(self.reader_rejected)
+        total.update(self.interference.rejected)
         return dict(total)

@@ -91,3 +91,23 @@ class PvtFix:
     h_acc_m: float = math.nan
     v_acc_m: float = math.nan
     vel_ned_mps: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+
+@dataclass(frozen=True)
+class ReceiverStatus:
+    """The receiver's own interference indicators (u-blox NAV-STATUS, MON-RF, MON-HW).
+
+    ``itow_s`` is NAV-STATUS's time of week; MON-RF and MON-HW carry none (None: the
+    stream's latest). ``spoof_det_state``: NAV-STATUS ``spoofDetState`` (0 unknown or
+    off, 1 no spoofing indicated, 2 spoofing indicated, 3 multiple indications);
+    ``jamming_state``: ``jammingState`` (0 unknown or off, 1 ok, 2 warning: interference
+    visible but fix ok, 3 critical: interference visible and no fix); ``jam_indicator``:
+    ``jamInd``, 0 (no CW jamming) to 255 (strong). None where the message has no such
+    field; MON-RF's worst block.
+    """
+
+    source: str
+    itow_s: float | None = None
+    spoof_det_state: int | None = None
+    jamming_state: int | None = None
+    jam_indicator: int | None = None

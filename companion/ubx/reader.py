@@ -1,4 +1,5 @@
-"""Read UBX RXM-RAWX, RXM-SFRBX and NAV-PVT from a file or a serial port (pyubx2).
+"""Read UBX RXM-RAWX, RXM-SFRBX, NAV-PVT and the receiver's interference indicators
+(NAV-STATUS, MON-RF, MON-HW) from a file or a serial port (pyubx2).
 
 Every frame that does not parse, and every measurement the receiver flags as unusable,
 is a counted rejection in :attr:`UbxSource.rejected`, never an exception.
@@ -13,7 +14,7 @@ from typing import IO, Any
 
 from pyubx2 import ERR_LOG, SET_LAYER_RAM, TXN_NONE, UBX_PROTOCOL, UBXMessage, UBXReader
 
-from companion.raw.obs import NavWords, PvtFix, RawEpoch, SignalObs
+from companion.raw.obs import NavWords, PvtFix, RawEpoch, ReceiverStatus, SignalObs
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +38,13 @@ BANDS = {
 }
 """UBX sigId -> band. GPS: L1 C/A; L2 CL, CM; L5 I, Q. Galileo: E1 C, B; E5a I, Q; E5b I,
 Q; E6 B, C, A."""
+
+
+STATUS_MESSAGES = frozenset({"NAV-STATUS", "MON-RF", "MON-HW"})
+"""The receiver's own spoofing (NAV-STATUS) and jamming (MON-RF; MON-HW on older
+receivers) indicators."""
+MON_RF_EPOCHS = 4
+"""MON-RF is asked for once every this many navigation epochs (1 s at 4 Hz)."""
 
 
 def system_name(gnss_id: object) -> str:
@@ -111,6 +119,25 @@ def pvt_to_fix(msg: Any) -> PvtFix:
     )
 
 
+def status_to_receiver(msg: Any) -> ReceiverStatus:
+    """NAV-STATUS (spoofing), MON-RF or MON-HW (jamming) as a :class:`ReceiverStatus`."""
+    ident = msg.identity
+    if ident == "NAV-STATUS":
+        return ReceiverStatus(
+            source=ident, itow_s=_itow_s(msg), spoof_det_state=int(msg.spoofDetState)
+        )
+    if ident == "MON-RF":
+        blocks = range(1, int(msg.nBlocks) + 1)
+        states = [int(getattr(msg, f"jammingState_{i:02d}")) for i in blocks]
+        inds = [int(getattr(msg, f"jamInd_{i:02d}")) for i in blocks]
+        if not states:
+            raise ValueError("MON-RF without an RF block")
+        return ReceiverStatus(source=ident, jamming_state=max(states), jam_indicator=max(inds))
+    return ReceiverStatus(
+        source=ident, jamming_state=int(msg.jammingState), jam_indicator=int(msg.jamInd)
+    )
+
+
 def _itow_s(msg: Any) -> float:
     # pyubx2 renders iTOW as a time of day; the raw payload keeps the milliseconds
     return float(int.from_bytes(msg.payload[0:4], "little")) * 1e-3
@@ -119,7 +146,8 @@ def _itow_s(msg: Any) -> float:
 class UbxSource:
     """Iterates over a UBX byte stream (a file or an open serial port).
 
-    Yields :class:`RawEpoch`, :class:`NavWords` and :class:`PvtFix` in stream order.
+    Yields :class:`RawEpoch`, :class:`NavWords`, :class:`PvtFix` and
+    :class:`ReceiverStatus` in stream order.
     """
 
     def __init__(self, stream: IO[bytes]) -> None:
@@ -135,7 +163,7 @@ class UbxSource:
         self.rejected["bad frame"] += 1
         log.debug("UBX frame rejected: %s", err)
 
-    def __iter__(self) -> Iterator[RawEpoch | NavWords | PvtFix]:
+    def __iter__(self) -> Iterator[RawEpoch | NavWords | PvtFix | ReceiverStatus]:
         for _raw, msg in self._reader:
             if msg is None:
                 continue
@@ -147,6 +175,8 @@ class UbxSource:
                     yield sfrbx_to_words(msg)
                 elif ident == "NAV-PVT":
                     yield pvt_to_fix(msg)
+                elif ident in STATUS_MESSAGES:
+                    yield status_to_receiver(msg)
             except (AttributeError, TypeError, ValueError) as err:
                 self.rejected[f"bad {ident}"] += 1
                 log.debug("UBX %s rejected: %s", ident, err)
@@ -164,17 +194,20 @@ def read_file(path: str) -> tuple[list[RawEpoch], list[NavWords], list[PvtFix], 
                 epochs.append(item)
             elif isinstance(item, NavWords):
                 nav.append(item)
-            else:
+            elif isinstance(item, PvtFix):
                 pvt.append(item)
     return epochs, nav, pvt, src.rejected
 
 
 def enable_raw_output(port: str = "UART2", rate_per_epoch: int = 1) -> bytes:
-    """A CFG-VALSET (RAM layer) turning RXM-RAWX, RXM-SFRBX and NAV-PVT on at ``port``."""
+    """A CFG-VALSET (RAM layer) turning RXM-RAWX, RXM-SFRBX, NAV-PVT and NAV-STATUS on at
+    ``port``, and MON-RF once every :data:`MON_RF_EPOCHS` epochs."""
     keys = [
         (f"CFG_MSGOUT_UBX_RXM_RAWX_{port}", rate_per_epoch),
         (f"CFG_MSGOUT_UBX_RXM_SFRBX_{port}", rate_per_epoch),
         (f"CFG_MSGOUT_UBX_NAV_PVT_{port}", rate_per_epoch),
+        (f"CFG_MSGOUT_UBX_NAV_STATUS_{port}", rate_per_epoch),
+        (f"CFG_MSGOUT_UBX_MON_RF_{port}", MON_RF_EPOCHS),
     ]
     return bytes(UBXMessage.config_set(SET_LAYER_RAM, TXN_NONE, keys).serialize())
 

@@ -166,7 +166,7 @@ def test_statustext_format_truncation_and_rate_limit() -> None:
     assert "".join(m.text for m in chunks) == ("CMP GNSS_LOST " + "no fix " * 20).rstrip()
     ap = AutopilotFlavour.ARDUPILOT
     assert enc.encode(Alert(12.0, AlertCode.GNSS_LOST, Severity.WARNING), ap) == []
-    assert len(enc.encode(Alert(12.0, AlertCode.BRIDGING, Severity.NOTICE), ap)) == 1
+    assert len(enc.encode(Alert(12.0, AlertCode.RTK_LOST, Severity.WARNING), ap)) == 1
     assert len(enc.encode(Alert(15.0, AlertCode.GNSS_LOST, Severity.WARNING), ap)) == 1
     assert enc.suppressed["GNSS_LOST"] == 1
     # a reboot (time going back) re-arms the code
@@ -198,6 +198,74 @@ def test_a_change_of_state_is_sent_whatever_the_interval() -> None:
     ]
     assert sent == [True, True, True, False, True, False, True]
     assert enc.suppressed == {"GNSS_LOST": 1, "NO_DATA": 1}
+
+
+def test_integrity_and_category_changes_are_sent_whatever_the_interval() -> None:
+    """INTEGRITY restored then lost again within the interval, and the category falling
+    twice: each is a new state and reaches the ground (thinned, the ground would believe
+    integrity restored, or a category above the service's); a repeat of a state is still
+    thinned."""
+    enc = Encoder(EncoderConfig(statustext_min_interval_s=5.0))
+    ap = AutopilotFlavour.ARDUPILOT
+    sent = [
+        bool(enc.encode(Alert(t, code, severity, text), ap))
+        for t, code, severity, text in (
+            (10.0, AlertCode.INTEGRITY, Severity.CRITICAL, "lost (cruise, NPA): HPL"),
+            (16.0, AlertCode.INTEGRITY, Severity.NOTICE, "restored (cruise, NPA)"),
+            (17.0, AlertCode.INTEGRITY, Severity.CRITICAL, "lost (cruise, NPA): VPL"),
+            (18.0, AlertCode.INTEGRITY, Severity.CRITICAL, "bridged 120 s: lost"),
+            (20.0, AlertCode.CAT, Severity.WARNING, "CAT III -> CAT II"),
+            (21.0, AlertCode.CAT, Severity.WARNING, "CAT II -> CAT I"),
+            (22.0, AlertCode.CAT, Severity.WARNING, "CAT II -> CAT I"),
+        )
+    ]
+    assert sent == [True, True, True, False, True, True, False]
+    assert enc.suppressed == {"INTEGRITY": 1, "CAT": 1}
+
+
+def test_the_ground_always_holds_the_newest_state_of_every_family() -> None:
+    """Random sequences of the state alerts (every family, INTEGRITY, CAT), a few tenths
+    of a second to a few seconds apart: after each, the last text the ground received of
+    each family says the state the service last raised (seeded)."""
+    rng = np.random.default_rng(35)
+    families = {
+        "gnss": [AlertCode.NO_GNSS, AlertCode.GNSS_LOST, AlertCode.GNSS_BACK],
+        "data": [AlertCode.NO_DATA, AlertCode.DATA_BACK],
+        "rtk": [AlertCode.RTK_LOST, AlertCode.RTK_BACK],
+        "raw": [AlertCode.RAW_FAULT, AlertCode.RAW_LOST, AlertCode.RAW_BACK],
+        "spoof": [AlertCode.SPOOF, AlertCode.SPOOF_END],
+    }
+    integrity = [(Severity.CRITICAL, "lost"), (Severity.NOTICE, "restored")]
+    categories = ["none -> CAT I", "CAT I -> CAT II", "CAT II -> none"]
+    ap = AutopilotFlavour.ARDUPILOT
+    for _ in range(20):
+        enc = Encoder(EncoderConfig(statustext_min_interval_s=5.0))
+        raised: dict[str, str] = {}
+        ground: dict[str, str] = {}
+        t = 0.0
+        for _ in range(200):
+            t += float(rng.uniform(0.1, 3.0))
+            kind = int(rng.integers(len(families) + 2))
+            if kind < len(families):
+                name = list(families)[kind]
+                code = families[name][int(rng.integers(len(families[name])))]
+                alert = Alert(t, code, Severity.WARNING, "x")
+                state = code.value
+            elif kind == len(families):
+                name = "integrity"
+                severity, text = integrity[int(rng.integers(2))]
+                alert = Alert(t, AlertCode.INTEGRITY, severity, text)
+                state = text
+            else:
+                name = "cat"
+                text = categories[int(rng.integers(len(categories)))]
+                alert = Alert(t, AlertCode.CAT, Severity.NOTICE, text)
+                state = text
+            raised[name] = state
+            if enc.encode(alert, ap):
+                ground[name] = state
+            assert ground == raised
+        assert sum(enc.suppressed.values()) > 0  # the limit did thin repeats
 
 
 def test_statustext_chunks_join_and_end() -> None:

@@ -12,6 +12,8 @@ Every MAVLink scaling is undone here, with the constants of
 :mod:`.vehicle`        HEARTBEAT (the autopilot's identity and flavour) ->
                        HeartbeatSample; GLOBAL_POSITION_INT -> AutopilotSolution;
                        VFR_HUD, EXTENDED_SYS_STATE
+:mod:`.signal`         GNSS_INTEGRITY -> GnssSignalReport (the receiver's own jamming
+                       and spoofing flags, as the autopilot relays them)
 :mod:`.clock`          the one clock (autopilot time since boot): wraps, epoch
                        stamps, SYSTEM_TIME, reboots -> RebootEvent
 :mod:`.rejections`     the rejection reasons' counting and rate-limited log

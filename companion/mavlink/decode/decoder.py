@@ -1,8 +1,8 @@
 """The decoder: dispatch by message id, the system id filter, the heading command, counting.
 
 :class:`Decoder` hands each message to its kind's handler (:mod:`.gnss`,
-:mod:`.inertial`, :mod:`.baro`, :mod:`.vehicle`, SYSTEM_TIME to :mod:`.clock`) after the
-checks every message passes:
+:mod:`.inertial`, :mod:`.baro`, :mod:`.vehicle`, :mod:`.signal`, SYSTEM_TIME to
+:mod:`.clock`) after the checks every message passes:
 
 * anything from our own component (191) is ignored (``own_message``);
 * until the system id is known (configured, or locked by the first autopilot
@@ -45,6 +45,7 @@ from companion.mavlink.decode.config import DecoderConfig
 from companion.mavlink.decode.gnss import GnssDecoder
 from companion.mavlink.decode.inertial import InertialDecoder
 from companion.mavlink.decode.rejections import Rejected, count_rejection
+from companion.mavlink.decode.signal import SignalDecoder
 from companion.mavlink.decode.vehicle import VehicleDecoder
 from companion.mavlink.ids import (
     MAV_CMD_USER_1,
@@ -57,6 +58,7 @@ from companion.mavlink.ids import (
     MAVLINK_MSG_ID_COMMAND_LONG,
     MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
     MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+    MAVLINK_MSG_ID_GNSS_INTEGRITY,
     MAVLINK_MSG_ID_GPS2_RAW,
     MAVLINK_MSG_ID_GPS2_RTK,
     MAVLINK_MSG_ID_GPS_RAW_INT,
@@ -128,6 +130,7 @@ class Decoder:
         self.gnss = gnss = GnssDecoder(c, clock)
         self.inertial = inertial = InertialDecoder(c, clock)
         baro = BaroDecoder(clock)
+        signal = SignalDecoder(clock, lambda: vehicle.flavour)
         self.field_rejections: collections.Counter[str] = collections.Counter()
         """Reason -> count of fields turned away inside an accepted message (HIGHRES_IMU's
         barometer): the message's IMU sample still counts as accepted."""
@@ -151,6 +154,7 @@ class Decoder:
             MAVLINK_MSG_ID_EXTENDED_SYS_STATE: vehicle.extended_sys_state,
             MAVLINK_MSG_ID_VFR_HUD: vehicle.vfr_hud,
             MAVLINK_MSG_ID_GLOBAL_POSITION_INT: vehicle.global_position_int,
+            MAVLINK_MSG_ID_GNSS_INTEGRITY: signal.gnss_integrity,
         }
 
     # ------------------------------------------------------------------ state

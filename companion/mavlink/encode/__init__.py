@@ -20,7 +20,10 @@ What each output becomes
 :class:`IntegrityReport`
     GNSS_INTEGRITY when the configured dialect carries it (``development``,
     ``all``), else nothing. ``raim_hfom``/``raim_vfom`` carry the horizontal and
-    vertical protection levels in cm (65534 cap); ``raim_state`` is OK or FAILED.
+    vertical protection levels in cm (65534 cap); ``raim_state`` is OK or FAILED;
+    ``jamming_state`` and ``spoofing_state`` the service's verdicts
+    (:meth:`companion.integrity.signal.SignalMonitor.stamp`: unknown, none, mitigated,
+    detected).
 
 Field choices (documented here because MAVLink leaves them open)
 ----------------------------------------------------------------

@@ -65,7 +65,8 @@ class EncoderConfig:
     (docs/mavlink.md, PX4 aux global position)."""
     statustext_min_interval_s: float = ranged(5.0, ge=0.0)
     """Least time between two STATUSTEXTs of the same alert code, s (a change of state
-    within a family, e.g. GNSS_BACK then GNSS_LOST, is always sent)."""
+    within a family, e.g. GNSS_BACK then GNSS_LOST, INTEGRITY restored then lost, is
+    always sent)."""
     statustext_interval_overrides: tuple[tuple[str, float], ...] = ()
     """``((code, interval_s), ...)`` per-code exceptions."""
     dialect: str = "ardupilotmega"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import collections
 import logging
 import math
+from collections.abc import Callable
 from typing import Any, cast
 
 import numpy as np
@@ -22,8 +23,16 @@ from companion.mavlink.ids import (
     GLOBAL_POSITION_PRIMARY,
     GLOBAL_POSITION_SRC_ESTIMATOR,
     GLOBAL_POSITION_UNHEALTHY,
+    GPS_JAMMING_STATE_DETECTED,
+    GPS_JAMMING_STATE_MITIGATED,
+    GPS_JAMMING_STATE_NOT_JAMMED,
+    GPS_JAMMING_STATE_UNKNOWN,
     GPS_RAIM_STATE_FAILED,
     GPS_RAIM_STATE_OK,
+    GPS_SPOOFING_STATE_DETECTED,
+    GPS_SPOOFING_STATE_MITIGATED,
+    GPS_SPOOFING_STATE_NOT_SPOOFED,
+    GPS_SPOOFING_STATE_UNKNOWN,
     MAV_AUTOPILOT_INVALID,
     MAV_COMP_ID_AUTOPILOT1,
     MAV_COMP_ID_ONBOARD_COMPUTER,
@@ -41,6 +50,7 @@ from companion.types import (
     AutopilotFlavour,
     FixType,
     IntegrityReport,
+    InterferenceState,
     NamedValue,
     NavMode,
     NavSolution,
@@ -72,6 +82,21 @@ _US_PER_S = units.US_PER_S
 _CDEG_PER_RAD = units.CDEG_PER_RAD
 _TWO_PI = 2.0 * math.pi
 
+
+JAMMING_STATE = {
+    InterferenceState.UNKNOWN: GPS_JAMMING_STATE_UNKNOWN,
+    InterferenceState.CLEAN: GPS_JAMMING_STATE_NOT_JAMMED,
+    InterferenceState.MITIGATED: GPS_JAMMING_STATE_MITIGATED,
+    InterferenceState.DETECTED: GPS_JAMMING_STATE_DETECTED,
+}
+"""GNSS_INTEGRITY ``jamming_state`` of the service's verdict."""
+SPOOFING_STATE = {
+    InterferenceState.UNKNOWN: GPS_SPOOFING_STATE_UNKNOWN,
+    InterferenceState.CLEAN: GPS_SPOOFING_STATE_NOT_SPOOFED,
+    InterferenceState.MITIGATED: GPS_SPOOFING_STATE_MITIGATED,
+    InterferenceState.DETECTED: GPS_SPOOFING_STATE_DETECTED,
+}
+"""GNSS_INTEGRITY ``spoofing_state`` of the service's verdict."""
 
 _ASCII_SPELLING = str.maketrans({"±": "+/-", "°": "deg", "σ": "sigma", "—": "-"})
 
@@ -129,8 +154,17 @@ ALERT_FAMILIES: dict[AlertCode, str] = {
     AlertCode.JAM_END: "jam",
 }
 """Alerts that say one state (GNSS, RTK, the data streams, the raw receiver, the fix
-rate, spoofing, jamming): a change of it is always sent, whatever ``statustext_min_interval_s``; only
-repeats of the state last sent are thinned."""
+rate, spoofing, jamming): a change of it is always sent, whatever
+``statustext_min_interval_s``; only repeats of the state last sent are thinned."""
+
+STATE_OF_ALERT: dict[AlertCode, Callable[[Alert], object]] = {
+    AlertCode.INTEGRITY: lambda alert: alert.severity,
+    AlertCode.CAT: lambda alert: alert.text,
+}
+"""Codes each of whose alerts says a state, and what the state is: INTEGRITY's severity
+(lost CRITICAL, restored NOTICE), CAT's text (the new category). A change of it is always
+sent, as a change of code within a family of :data:`ALERT_FAMILIES`: a restoration, or
+a category, thinned away would leave the ground with an older state than the service's."""
 
 
 class Encoder:
@@ -163,8 +197,9 @@ class Encoder:
         self._has_integrity = hasattr(self._mod, "MAVLink_gnss_integrity_message")
         self._first_alt_mm: int | None = None
         self._last_alert_t: dict[AlertCode, float] = {}
-        self._family_state: dict[str, AlertCode] = {}
-        """The last code sent of each family of :data:`ALERT_FAMILIES`."""
+        self._family_state: dict[str, object] = {}
+        """The last state sent of each family of :data:`ALERT_FAMILIES` (its code) and of
+        each code of :data:`STATE_OF_ALERT`."""
         self._text_id = 0
         """Id of the last chunked STATUSTEXT (1..65535, wrapping)."""
         self._intervals = {
@@ -452,10 +487,14 @@ class Encoder:
     def _alert(self, alert: Alert) -> list[Any]:
         code = alert.code
         family = ALERT_FAMILIES.get(code)
+        state: object = code
+        state_of = STATE_OF_ALERT.get(code)
+        if state_of is not None:
+            family, state = code.value, state_of(alert)
         # a change of state within a family (GNSS lost -> back -> lost) is always sent: the
         # interval only thins repeats of the state last sent, so the ground never keeps an
         # older state than the service's
-        change = family is not None and self._family_state.get(family, code) is not code
+        change = family is not None and self._family_state.get(family, state) != state
         last = self._last_alert_t.get(code)
         interval = self._intervals.get(code, self.config.statustext_min_interval_s)
         if not change and last is not None and last <= alert.t_s < last + interval:
@@ -463,7 +502,7 @@ class Encoder:
             return []
         self._last_alert_t[code] = alert.t_s
         if family is not None:
-            self._family_state[family] = code
+            self._family_state[family] = state
         # STATUSTEXT is read as ASCII by most ground stations (pymavlink among them):
         # spell the few non-ASCII signs the alerts use, drop anything else
         plain = alert.text.translate(_ASCII_SPELLING)
@@ -521,10 +560,10 @@ class Encoder:
         return [
             self._mod.MAVLink_gnss_integrity_message(
                 self.gps_id,
-                0,
-                0,
-                0,
-                0,
+                0,  # system_errors
+                0,  # authentication_state: unknown
+                JAMMING_STATE[rep.jamming],
+                SPOOFING_STATE[rep.spoofing],
                 GPS_RAIM_STATE_OK if ok else GPS_RAIM_STATE_FAILED,
                 cm(rep.hpl_m),
                 cm(rep.vpl_m),

@@ -35,8 +35,14 @@ def log_format(path: Path | str) -> str:
     return "tlog"
 
 
-def open_flight_log(path: Path | str, light_ids: Collection[int] = ()) -> Any:
+def open_flight_log(
+    path: Path | str, light_ids: Collection[int] = (), dialect: str = "ardupilotmega"
+) -> Any:
     """A reader of ``path`` by its content: iterate ``(t_rx_s, message)``; ``stats``.
+
+    ``dialect`` is what a telemetry log is parsed with (the service's own: a frame it
+    does not know is skipped and counted, as on a link); a .bin or .ulg reader builds its
+    messages itself.
 
     Raises
     ------
@@ -61,4 +67,4 @@ def open_flight_log(path: Path | str, light_ids: Collection[int] = ()) -> Any:
             return read_ulog(path, ids)
         except UlogError as exc:
             raise TlogError(str(exc)) from exc
-    return TlogReader(path, light_ids=ids)
+    return TlogReader(path, dialect, light_ids=ids)

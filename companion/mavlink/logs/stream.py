@@ -18,7 +18,10 @@ Streams (the conventions of a telemetry log):
 * ``ATTITUDE`` the autopilot's attitude, its rates the latest gyro sample;
 * ``GPS_RAW_INT`` / ``GPS2_RAW`` every GNSS sample as logged (no-fix samples too);
 * ``GLOBAL_POSITION_INT`` the autopilot's own position estimate;
-* ``HEARTBEAT`` and ``SYSTEM_TIME`` once a second of boot time.
+* ``HEARTBEAT`` and ``SYSTEM_TIME`` once a second of boot time;
+* ``GNSS_INTEGRITY`` the receiver's own jamming and spoofing flags, where a PX4 log has
+  them (packed with the ``all`` dialect, which carries ArduPilot's messages and this one
+  of the development set).
 
 A value a message field cannot hold (not finite where an integer goes, or beyond the
 field's range) drops that message, counted ``bad_value`` in :attr:`LogStream.stats`.
@@ -233,7 +236,9 @@ class LogStream:
         self.utc_offset_us = utc_offset_us
         self.stats = stats
         self.messages = 0
-        self._mod = load_dialect("ardupilotmega")
+        # "all": ArduPilot's messages and the development set's (GNSS_INTEGRITY from a
+        # PX4 log), the same definitions of every message they share
+        self._mod = load_dialect("all")
         self._light_ids = light_ids
         self.stats_prefix = stats_prefix
         self.what = what

@@ -9,6 +9,13 @@ Topics used (instance 0 unless said; the ``timestamp`` of each is its boot time)
   (older logs) or the latest ``vehicle_angular_velocity``;
 * ``vehicle_gps_position`` or ``sensor_gps`` -> GPS_RAW_INT (instance 1: GPS2_RAW),
   every sample as logged, accuracies from ``eph``/``epv``/``s_variance_m_s``;
+* the receiver's own ``jamming_state`` and ``spoofing_state`` of instance 0 (of
+  ``sensor_gps`` when the log has them there, as PX4 streams them) -> GNSS_INTEGRITY,
+  when they change and at most :data:`INTEGRITY_INTERVAL_US` apart otherwise, as PX4
+  sends it (``id`` the device id's low byte; the states as logged: 0 unknown, 1 ok, 2
+  mitigated -- "warning" / "spoofing indicated" before PX4 renamed them --, 3
+  detected). Logs older than these fields (PX4 1.11's has ``jamming_indicator`` and
+  ``noise_per_ms`` only: no MAVLink field carries them) give none;
 * ``vehicle_global_position`` -> GLOBAL_POSITION_INT (velocity from the latest
   ``vehicle_local_position``, relative altitude against the first 3D-fix GNSS
   altitude, heading from the attitude);
@@ -42,6 +49,8 @@ from companion.mavlink.logs.stream import (
 from companion.nav.rotations import quat_to_euler
 
 MAV_AUTOPILOT_PX4 = 12
+INTEGRITY_INTERVAL_US = 1_000_000
+"""An unchanged GNSS_INTEGRITY is repeated this often (PX4's stream: 1 Hz)."""
 SYNTHETIC_EPOCH_US = 1_500_000_000_000_000
 """UNIX time given to boot time 0 of a log without GNSS time (2017-07-14T02:40:00Z)."""
 ARMING_STATE_ARMED = 2
@@ -143,6 +152,11 @@ def _events(
     yaw_rad: float | None = None
     first_fix_alt_m: float | None = None
     utc_offsets: list[int] = []
+    integrity_key = next(
+        (k for k in ("sensor_gps", "vehicle_gps_position") if "jamming_state" in topics.get(k, {})),
+        None,
+    )
+    last_integrity: tuple[int, tuple[int, int]] | None = None
     cols: dict[str, dict[str, list[Any]]] = {
         key: {f: v.tolist() for f, v in data.items()} for key, data in topics.items()
     }
@@ -199,6 +213,24 @@ def _events(
                 if ev.args[1] >= 3 and first_fix_alt_m is None:
                     first_fix_alt_m = ev.args[4] / 1000.0
                 events.append(ev)
+                if key == integrity_key:
+                    states = (
+                        int(get(key, "jamming_state", i)),
+                        int(get(key, "spoofing_state", i, 0)),
+                    )
+                    if (
+                        last_integrity is None
+                        or last_integrity[1] != states
+                        or t_us - last_integrity[0] >= INTEGRITY_INTERVAL_US
+                    ):
+                        last_integrity = (t_us, states)
+                        device = int(get(key, "device_id", i, 0)) & 0xFF
+                        auth = int(get(key, "authentication_state", i, 0))
+                        events.append(
+                            Event(
+                                t_us, order, "gnss_integrity", _integrity_args(device, auth, states)
+                            )
+                        )
             elif name == "vehicle_local_position":
                 vel_ned = (get(key, "vx", i), get(key, "vy", i), get(key, "vz", i))
             elif name == "vehicle_global_position":
@@ -231,6 +263,12 @@ def _events(
     last = max(e.t_us for e in events)
     events += heartbeat_events(first, last, status, mav_type, MAV_AUTOPILOT_PX4)
     return events, offset_us
+
+
+def _integrity_args(device: int, authentication: int, states: tuple[int, int]) -> list[int]:
+    """GNSS_INTEGRITY's arguments: the receiver's states, nothing else known."""
+    jamming, spoofing = states
+    return [device, 0, authentication, jamming, spoofing, 0, 65535, 65535, 255, 255, 255, 255]
 
 
 def _gnss(key: str, i: int, t_us: int, order: int, c: dict[str, list[Any]]) -> Event | None:
