@@ -869,12 +869,15 @@ class Engine:
         navigators restart from the reference that saw it, carried to now by the IMU."""
         navigator = self.navigators.navigator
         nav = navigator.predict(self.now_s) if navigator.initialised and self.now_s else None
+        rid = fix.receiver_id
         step = self.integrity.spoof.on_fix(
             fix,
             meas,
             nav,
             airborne=not self._on_ground(),
-            suspected=self.integrity.fde.shown_wrong(fix.receiver_id),
+            suspected=self.integrity.fde.shown_wrong(rid),
+            own_verdict=self.signal.receiver_verdict(rid, fix.t_s),
+            evidence=self.signal.spoof_evidence(rid, fix.t_s),
         )
         state = step.rollback
         if state is not None:

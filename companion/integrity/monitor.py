@@ -29,6 +29,7 @@ with an adaptive GPS/INS blend (requirement tables). RTCA DO-229 appendix J
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -43,7 +44,14 @@ from companion.integrity.spoof import SpoofConfig, SpoofMonitor
 from companion.nav.baro import BaroReference
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
-from companion.types import GnssFix, LandedState, NavSolution, Output
+from companion.types import (
+    GnssFix,
+    IntegrityReport,
+    InterferenceState,
+    LandedState,
+    NavSolution,
+    Output,
+)
 
 __all__ = ["FixCheck", "IntegrityConfig", "IntegrityMonitor"]
 
@@ -135,7 +143,13 @@ class IntegrityMonitor:
             baro = None
         if baro is None:
             self.fde.pairs.restart_baro()
-        return self.fde.on_fix(fix, meas, update, predicted, references, baro)
+        outputs = self.fde.on_fix(fix, meas, update, predicted, references, baro)
+        if outputs and self.spoof.excluded(fix.receiver_id):
+            # the receiver is held out as spoofed, said once by SPOOF: its tests' failures
+            # meanwhile are that same event (counted, not alerted again)
+            self.stats["fault_alerts_while_spoofed"] += len(outputs)
+            return []
+        return outputs
 
     def baro_usable(self, baro: BaroReference) -> bool:
         """Is the barometer tested against now? ``baro_reference`` on, out of the taxi
@@ -194,10 +208,17 @@ class IntegrityMonitor:
             return []
         fde = self.fde
         fde.advance(t)
-        return self.protection.update(
+        outputs = self.protection.update(
             solution,
             landed,
             fde.fault_unresolved,
             self.fault_detected,
             hpl_floor_m=self.spoof.hpl_floor_m(),
         )
+        state = self.spoof.state()
+        if state is InterferenceState.UNKNOWN:
+            return outputs
+        return [
+            dataclasses.replace(out, spoofing=state) if isinstance(out, IntegrityReport) else out
+            for out in outputs
+        ]

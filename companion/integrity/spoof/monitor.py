@@ -44,7 +44,16 @@ from companion.integrity.spoof.drag import DragTest, DragVerdict
 from companion.integrity.spoof.episode import Episode, Reference, horizontal_distance2
 from companion.integrity.spoof.inertial import InertialIncrements
 from companion.nav.navigator import GnssMeasurement, NavState
-from companion.types import Alert, AlertCode, AttitudeSample, FixType, GnssFix, ImuSample, Severity
+from companion.types import (
+    Alert,
+    AlertCode,
+    AttitudeSample,
+    FixType,
+    GnssFix,
+    ImuSample,
+    InterferenceState,
+    Severity,
+)
 
 log = logging.getLogger(__name__)
 
@@ -144,6 +153,18 @@ class SpoofMonitor:
         self.stats["bridged_on_reference"] += 1
         return _with_vertical_of(best, state)
 
+    def state(self) -> InterferenceState:
+        """The service's spoofing verdict for GNSS_INTEGRITY: MITIGATED while a receiver is
+        held out (the solution is the IMU's), DETECTED while one re-admitted unverified
+        widens the protection level, CLEAN while receivers are tested, else UNKNOWN."""
+        if any(not ep.unverified for ep in self.episodes.values()):
+            return InterferenceState.MITIGATED
+        if self.episodes:
+            return InterferenceState.DETECTED
+        if any(rx.last is not None and rx.last.tested for rx in self._receivers.values()):
+            return InterferenceState.CLEAN
+        return InterferenceState.UNKNOWN
+
     def detectable_mps2(self, receiver_id: int, tau_s: float) -> float:
         """The smallest drag receiver ``receiver_id``'s test sees within ``tau_s``, m/s^2."""
         rx = self._receivers.get(receiver_id)
@@ -160,6 +181,8 @@ class SpoofMonitor:
         nav: NavState | None,
         airborne: bool,
         suspected: bool = False,
+        own_verdict: InterferenceState = InterferenceState.UNKNOWN,
+        evidence: tuple[str, ...] = (),
     ) -> SpoofStep:
         """Test one fix (see the module docstring).
 
@@ -172,6 +195,10 @@ class SpoofMonitor:
             can be degrees off before the taxi correction; the filter restarts at take-off).
         suspected : another test holds the receiver out on independent evidence: nothing
             is anchored or learnt from its fixes meanwhile (they may be a drag's).
+        own_verdict : the receiver's own spoofing verdict (its flags, relayed or read on the
+            raw link: :meth:`companion.integrity.signal.SignalMonitor.receiver_verdict`):
+            DETECTED holds it out as a failed drag test does, and keeps it out.
+        evidence : signal-level evidence to cite in the alert (``"raw: C/N0 spread ..."``).
         """
         cfg = self.config
         if not cfg.enabled or fix.vel_ne_mps is None or int(fix.fix_type) < int(FixType.FIX_3D):
@@ -217,8 +244,15 @@ class SpoofMonitor:
         )
         rx.last = verdict
         self.stats["tested"] += int(verdict.tested)
+        flagged = own_verdict is InterferenceState.DETECTED
         if held and episode is not None:
+            if flagged:
+                episode.agree_since_s = None  # never re-admitted on its flag's word alone
+                return SpoofStep()
             return self._while_held(rx, episode, fix, meas, inc, vrw)
+        if flagged and (episode is None or episode.unverified):
+            self.stats["receiver_flag"] += 1
+            return self._detected(rx, verdict, fix, nav, inc, vrw, evidence, flagged=True)
         if not verdict.failed:
             rx.fails, rx.first_fail_t_s = 0, None
             return SpoofStep()
@@ -238,7 +272,7 @@ class SpoofMonitor:
             rx.test.reset()
             rx.fails, rx.first_fail_t_s = 0, None
             return SpoofStep()
-        return self._detected(rx, verdict, fix, nav, inc, vrw)
+        return self._detected(rx, verdict, fix, nav, inc, vrw, evidence)
 
     def _detected(
         self,
@@ -248,14 +282,21 @@ class SpoofMonitor:
         nav: NavState | None,
         inc: object,
         vrw: float,
+        evidence: tuple[str, ...] = (),
+        flagged: bool = False,
     ) -> SpoofStep:
         rid = fix.receiver_id
-        anchor = rx.test.anchor_before_drag()
-        a = float(np.hypot(*verdict.acc_ne_mps2))
-        text = (
-            f"rx{rid} moves {a:.2f} m/s2 unlike the IMU over {verdict.tau_s:.1f} s "
-            f"(test {verdict.stat:.0f} > {verdict.threshold:.0f})"
-        )
+        if flagged:
+            # the receiver says so: the youngest reference anchored before its word
+            anchor = rx.test.refs[-1] if rx.test.refs else None
+            text = f"rx{rid} says it is spoofed"
+        else:
+            anchor = rx.test.anchor_before_drag()
+            a = float(np.hypot(*verdict.acc_ne_mps2))
+            text = (
+                f"rx{rid} moves {a:.2f} m/s2 unlike the IMU over {verdict.tau_s:.1f} s "
+                f"(test {verdict.stat:.0f} > {verdict.threshold:.0f})"
+            )
         self.stats["detections"] += 1
         rx.fails, rx.first_fail_t_s = 0, None
         rollback: NavState | None = None
@@ -274,6 +315,8 @@ class SpoofMonitor:
             # no navigator state at the anchor: nothing to roll back to or hold against
             self.stats["detections_without_reference"] += 1
             text += ": no reference to hold it against"
+        if evidence:
+            text += "; " + "; ".join(evidence)
         log.warning("t=%.2f s SPOOF %s", fix.t_s, text)
         return SpoofStep([Alert(fix.t_s, AlertCode.SPOOF, Severity.CRITICAL, text[:120])], rollback)
 
