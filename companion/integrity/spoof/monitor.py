@@ -15,11 +15,12 @@ test (:mod:`.drag`) on its velocity while airborne, and arbitrates:
   level (:meth:`SpoofMonitor.hpl_floor_m`): the service carries a position the receiver
   contradicts, and says by how much.
 * **Re-admission** once its position and velocity have agreed with the reference for
-  ``readmit_s`` (within the chi-square quantile of ``readmit_false_alarm_prob``):
-  ``CMP SPOOF_END``. A reference that could no longer tell the largest separation seen
-  (its own uncertainty grew past it: a MEMS IMU after a minute or two) does not keep the
-  receiver out for ever: it is re-admitted *unverified* with a ``CMP SPOOF`` warning, and
-  the protection level keeps the largest separation until the next verified agreement.
+  ``readmit_s`` (within the chi-square quantile of ``readmit_false_alarm_prob``), never
+  while the receiver's own flag says DETECTED: ``CMP SPOOF_END``. When the reference
+  could no longer have seen the largest separation of the episode (its own uncertainty
+  grew past it: a MEMS IMU after a minute or two; or nothing ever separated), the
+  agreement is *unverified*: the protection level keeps the larger of that separation and
+  what the reference cannot rule out, and the alert says so.
 
 Pure: no I/O, no clock.
 
@@ -361,30 +362,32 @@ class SpoofMonitor:
         if math.sqrt(rx.test.threshold) * sigma_m < ep.max_sep_m:
             return self._end(rx, ep, fix)
         # it agrees with a reference too uncertain to have seen what it showed
-        return self._unverified(rx, ep, fix, sigma_m)
+        return self._end(rx, ep, fix, unverified_m=math.sqrt(self._readmit_thr) * sigma_m)
 
-    def _end(self, rx: _Receiver, ep: Episode, fix: GnssFix) -> SpoofStep:
+    def _end(
+        self, rx: _Receiver, ep: Episode, fix: GnssFix, unverified_m: float | None = None
+    ) -> SpoofStep:
+        """Re-admit the receiver: ``SPOOF_END``. ``unverified_m``: the reference it agrees
+        with is too uncertain to have seen what the episode showed (a MEMS IMU after a
+        minute or two, or an episode that never separated): the protection level keeps
+        the larger of that and the largest separation seen until another episode ends
+        verified."""
         rid = ep.receiver_id
-        del self.episodes[rid]
         rx.test.reset()
-        self.stats["readmitted"] += 1
         text = (
             f"rx{rid} agrees with the IMU again after {fix.t_s - ep.start_t_s:.0f} s "
             f"(within {ep.last_sep_m:.1f} m): re-admitted"
         )
+        if unverified_m is None:
+            del self.episodes[rid]
+            self.stats["readmitted"] += 1
+        else:
+            ep.unverified = True
+            ep.max_sep_m = max(ep.max_sep_m, unverified_m)
+            self.stats["readmitted_unverified"] += 1
+            text += f"; the IMU cannot tell +/-{unverified_m:.0f} m: protection kept at it"
         log.warning("t=%.2f s SPOOF_END %s", fix.t_s, text)
         return SpoofStep([Alert(fix.t_s, AlertCode.SPOOF_END, Severity.NOTICE, text[:120])])
-
-    def _unverified(self, rx: _Receiver, ep: Episode, fix: GnssFix, sigma_m: float) -> SpoofStep:
-        ep.unverified = True
-        rx.test.reset()
-        self.stats["readmitted_unverified"] += 1
-        text = (
-            f"rx{ep.receiver_id} re-admitted unverified: the IMU can no longer tell "
-            f"(+/-{sigma_m:.0f} m); protection widened to {ep.max_sep_m:.0f} m"
-        )
-        log.warning("t=%.2f s SPOOF %s", fix.t_s, text)
-        return SpoofStep([Alert(fix.t_s, AlertCode.SPOOF, Severity.WARNING, text[:120])])
 
 
 def _sigma_max_m(cov: np.ndarray) -> float:
