@@ -119,9 +119,11 @@ class IntegrityMonitor:
         return self.fde.last_check
 
     def accuracy_floor_m(self) -> tuple[float, float]:
-        """Horizontal and vertical 1-sigma the published accuracies must not undercut, m
-        (:meth:`FaultDetector.accuracy_floor_m`)."""
-        return self.fde.accuracy_floor_m()
+        """Horizontal and vertical 1-sigma the published accuracies must not undercut, m:
+        an unresolved fault's (:meth:`FaultDetector.accuracy_floor_m`) or a receiver held
+        out as spoofed (:meth:`SpoofMonitor.accuracy_floor_m`)."""
+        h_m, v_m = self.fde.accuracy_floor_m()
+        return max(h_m, self.spoof.accuracy_floor_m()), v_m
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express stored fixes in the engine's new local frame (re-anchoring)."""

@@ -38,6 +38,9 @@ class SpoofConfig:
     for this long."""
     settle_s: float = ranged(20.0, ge=0.0)
     """References are kept only after the filter has run this long (its biases settled)."""
+    calm_s: float = ranged(5.0, ge=0.0)
+    """... nor within this long of a fix that pulled the filter (an innovation beyond its
+    1e-3 quantile: its biases may be learning a disturbance), s."""
     calibration_tau_s: float = ranged(300.0, gt=0.0)
     """Memory of the in-flight calibration of the test statistic, s."""
     calibration_prior: float = ranged(4.0, ge=1.0)

@@ -108,6 +108,10 @@ class DragVerdict:
 
 
 _I2 = np.eye(2)
+CALM_NIS = float(chi2.isf(1e-3, 2))
+"""A fix whose innovation in the filter exceeds this (2 dof, 1e-3) pulls the filter: its
+biases may be learning a disturbance (a failing IMU, a drag), and no reference is kept
+for ``calm_s`` after it."""
 LEARN_BELOW = 0.25
 """The calibration and the wander learn only from fixes whose statistic is below this
 fraction of the threshold: a drag building up below the threshold stops teaching them
@@ -154,6 +158,7 @@ class DragTest:
         self._last_anchor_t = -math.inf
         self._cal_t: float | None = None
         self._acc = np.zeros(2)
+        self._upset_t = -math.inf
         self._r_white = self.config.gnss_vel_floor_mps**2
         self._r_n = 0
         self._last_z: FloatArray | None = None
@@ -229,6 +234,7 @@ class DragTest:
             and self._start_t is not None
             and t_s - self._start_t >= self.config.settle_s
             and t_s - self._last_anchor_t >= self.config.anchor_interval_s
+            and t_s - self._upset_t >= self.config.calm_s
         ):
             self._anchor(t_s, inc, payload)
         self._prune(t_s)
@@ -268,6 +274,8 @@ class DragTest:
         s = self.p[0:2, 0:2] + r * _I2
         k = np.linalg.solve(s, self.p[0:2, :]).T  # (7, 2)
         y = z - self.x[0:2]
+        if float(y @ np.linalg.solve(s, y)) > CALM_NIS:
+            self._upset_t = self._t  # the filter is being pulled: no reference for a while
         self.x = self.x + k @ y
         ikh = np.eye(7)
         ikh[:, 0:2] -= k

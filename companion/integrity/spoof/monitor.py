@@ -58,6 +58,9 @@ from companion.types import (
 
 log = logging.getLogger(__name__)
 
+K99_2D = math.sqrt(float(chi2.isf(0.01, 2)))
+"""The 99 % radius of a circular 2-D normal in sigmas (3.03)."""
+
 
 @dataclass(frozen=True, slots=True)
 class SpoofStep:
@@ -117,6 +120,18 @@ class SpoofMonitor:
         """Held out by an episode (not yet re-admitted)."""
         ep = self.episodes.get(receiver_id)
         return ep is not None and not ep.unverified
+
+    def accuracy_floor_m(self) -> float:
+        """The published horizontal 1-sigma accuracy's floor while a receiver is held, m:
+        its separation over the 99 % factor of a 2-D normal (3.03), so that the published
+        99 % bound reaches the receiver's position too. The IMU is trusted over a receiver
+        it contradicts, but an IMU can fail as well and nothing here can tell a failed IMU
+        from a spoofed receiver: the accuracy says how far apart the two are."""
+        floor = 0.0
+        for ep in self.episodes.values():
+            if not ep.unverified:
+                floor = max(floor, ep.last_sep_m / K99_2D)
+        return floor
 
     def hpl_floor_m(self) -> float:
         """The horizontal protection level's floor, m: the separation of a held-out
