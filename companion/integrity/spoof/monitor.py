@@ -144,10 +144,11 @@ class SpoofMonitor:
 
     def bridge(self, state: NavState) -> NavState:
         """``state`` (the navigator's, at about the newest IMU time) with its north and east
-        replaced by the held-out episode's reference carried there by the IMU alone, when
-        one is held and sharper: the reference is the last solution no fix of the
-        spoofed receiver touched, where the navigator (even restarted from it) may carry
-        an attitude or bias it learnt from the drag. ``state`` itself otherwise."""
+        replaced by the held-out episode's reference carried there by the IMU alone (the
+        sharpest, when several are held): the reference is the last solution no fix of
+        the spoofed receiver touched, where the navigator, even restarted from it, may
+        carry an attitude or a bias it learnt from the drag and a covariance that does
+        not know it. ``state`` itself when none is held."""
         best: NavState | None = None
         inc = None
         for ep in self.episodes.values():
@@ -162,9 +163,7 @@ class SpoofMonitor:
                 < _sigma_max_m(best.pos_cov_ned_m2[:2, :2])
             ):
                 best = ref
-        if best is None or _sigma_max_m(best.pos_cov_ned_m2[:2, :2]) >= _sigma_max_m(
-            state.pos_cov_ned_m2[:2, :2]
-        ):
+        if best is None:
             return state
         self.stats["bridged_on_reference"] += 1
         return _with_vertical_of(best, state)
