@@ -95,6 +95,7 @@ LIGHT_MESSAGE_IDS = frozenset(
         MAVLINK_MSG_ID_EXTENDED_SYS_STATE,
         MAVLINK_MSG_ID_VFR_HUD,
         MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
+        MAVLINK_MSG_ID_GNSS_INTEGRITY,
     }
 )
 """The messages :meth:`Decoder.decode` takes as
