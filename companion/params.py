@@ -423,6 +423,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SPF_PERSIST", "spoof.persist_s"),
     ("SPF_READMIT", "spoof.readmit_s"),
     ("SPF_READMIT_PFA", "spoof.readmit_false_alarm_prob"),
+    ("SPF_CALM", "spoof.calm_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""
