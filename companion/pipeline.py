@@ -41,7 +41,8 @@ from typing import Any
 
 from companion.config import Config
 from companion.engine import Engine
-from companion.engine.gnss_lag import LagTracker, MeasuredLag
+from companion.engine.gnss_lag import MeasuredLag
+from companion.engine.lag_control import LagControl
 from companion.mavlink.autopilot_params import AutopilotParams
 from companion.mavlink.commands import DecodedCommand, Retransmissions
 from companion.mavlink.decode import Decoder
@@ -77,6 +78,7 @@ from companion.types import (
     HeartbeatSample,
     ImuSample,
     NavMode,
+    NavSolution,
     Output,
     RawSolution,
     RebootEvent,
@@ -202,10 +204,14 @@ class Pipeline:
         rate): read over the parameter protocol when it appears and after a reboot."""
         self._loop_rate_hz: float | None = None
         self._warned_no_mav_gps = False
-        self.lag = LagTracker() if self.config.decoder.gnss_delay_measure else None
+        dec = self.config.decoder
+        self.lags = LagControl(
+            self.engine, self.decoder.gnss.delay_s, dec.gnss_delay_s, dec.gnss_delay_measure
+        )
+        """The receivers' lags: receiver 0's measured in flight and carried in, every change
+        told to the engine (:mod:`companion.engine.lag_control`)."""
+        self.lag = self.lags.tracker
         """Receiver 0's lag measured in flight (:mod:`companion.engine.gnss_lag`)."""
-        self._measured_lag_s: float | None = None
-        """The measured lag the fixes are placed with (None: not taken)."""
         self.raw: RawLink | None = RawLink(self.config.raw) if self.config.raw.enabled else None
         """The raw receiver's carrier-phase link (``[raw]``; :mod:`companion.raw.link`)."""
 
@@ -261,20 +267,18 @@ class Pipeline:
             return early if command is None else early + self._answer(command, None, t_rx_s)
         frames: list[bytes] = []
         handle = self.engine.handle
-        lag = self.lag
+        lags = self.lags
         for sample in samples:
             kind = type(sample)
-            if lag is not None:
-                if kind is ImuSample:
-                    lag.on_imu(sample)  # type: ignore[arg-type]
-                elif kind is AttitudeSample:
-                    lag.on_attitude(sample)  # type: ignore[arg-type]
-                elif kind is GnssFix:
-                    lag.on_fix(sample)  # type: ignore[arg-type]
-                    measured = lag.take()
-                    if measured is not None:
-                        frames += self._on_measured_lag(measured, sample.t_s)
-                    self.engine.gnss_lag_sigma_s = self._lag_sigma_s()
+            if kind is ImuSample:
+                lags.on_imu(sample)  # type: ignore[arg-type]
+            elif kind is AttitudeSample:
+                lags.on_attitude(sample)  # type: ignore[arg-type]
+            elif kind is GnssFix:
+                measured = lags.on_fix(sample)  # type: ignore[arg-type]
+                if measured is not None:
+                    frames += self._on_measured_lag(measured, sample.t_s)
+                self.engine.gnss_lag_sigma_s = self._lag_sigma_s()
             if kind is HeadingCommand:
                 command = self.decoder.take_command()  # left with every HeadingCommand
                 if command is not None:
@@ -287,8 +291,7 @@ class Pipeline:
                 self._data_clock = None
                 self._inertial_clock = False
                 self.autopilot_params.reset()  # what was derived stands until read again
-                if lag is not None:
-                    lag.restart(self.decoder.gnss.delay_s[0])
+                lags.restart()
                 frames += self._request_streams()
             else:
                 self.rates.observe(msg._type, sample.t_s)
@@ -379,16 +382,7 @@ class Pipeline:
                     "GPS_RAW_INT" if injected == 0 else "GPS2_RAW",
                 )
         for receiver in (0, 1):
-            delay_s = ap.gps_delay_s(receiver)
-            if delay_s is None or (receiver == 0 and self._measured_lag_s is not None):
-                delay_s = self._default_delay_s(receiver)
-            if delay_s != gnss.delay_s[receiver]:
-                gnss.delay_s[receiver] = delay_s
-                if receiver == 0 and self.lag is not None:
-                    self.lag.restart(delay_s)
-                log.info(
-                    "GNSS receiver %d: fixes taken %.3f s before their arrival", receiver, delay_s
-                )
+            self.lags.parameter(receiver, ap.gps_delay_s(receiver))
         if feeds and instance is None and ap.types_known and not self._warned_no_mav_gps:
             self._warned_no_mav_gps = True
             log.warning(
@@ -407,29 +401,20 @@ class Pipeline:
                 return self._request_streams()
         return []
 
-    def _default_delay_s(self, receiver: int) -> float:
-        """A receiver's lag where the autopilot's parameter gives none (or receiver 0's was
-        measured): the configured one, else (receiver 0) the one measured in flight, else 0."""
-        configured = self.config.decoder.gnss_delay_s
-        if configured > 0.0 or receiver != 0 or self._measured_lag_s is None:
-            return configured
-        return self._measured_lag_s
-
     def _lag_sigma_s(self) -> float | None:
-        """How far receiver 0's fixes may be misplaced in time, s: the measured lag's
-        difference from the one in use, or its sigma if larger (None before two windows
-        measured it: the spoofing monitor then assumes its prior)."""
+        """What is not known of receiver 0's fix placement, s: the measured lag's difference
+        from the one in use, or its sigma if larger (None before two windows measured it:
+        the spoofing monitor then takes its prior)."""
         m = self.lag.measured() if self.lag is not None else None
         if m is None or m.windows < 2:
             return None
-        return max(abs(m.lag_s - self.decoder.gnss.delay_s[0]), m.sigma_s)
+        return max(abs(m.lag_s - self.lags.delay_s[0]), m.sigma_s)
 
     def _on_measured_lag(self, m: MeasuredLag, t_s: float) -> list[bytes]:
-        """Receiver 0's lag measured: the fixes placed with it unless the configuration
-        gives a lag (then only logged). The autopilot's parameter is what its own filter
-        assumes, not a measurement of the stamps it sends: where it disagrees, the
-        measurement is used and the disagreement announced."""
-        gnss = self.decoder.gnss
+        """Receiver 0's lag measured: the fixes carried to it (:meth:`LagControl.switch`)
+        unless the configuration gives a lag (then only logged). The autopilot's parameter
+        is what its own filter assumes, not a measurement of the stamps it sends: where it
+        disagrees, the measurement is used and the disagreement announced."""
         said = f"{m.lag_s * 1000.0:.0f}+/-{m.sigma_s * 1000.0:.0f} ms"
         if self.config.decoder.gnss_delay_s > 0.0:
             log.warning(
@@ -438,12 +423,9 @@ class Pipeline:
                 said,
             )
             return []
-        self._measured_lag_s = m.lag_s
-        gnss.delay_s[0] = m.lag_s
-        assert self.lag is not None
-        self.lag.restart(m.lag_s)
+        self.lags.switch(m.lag_s, t_s)
         log.warning(
-            "GNSS receiver 0: lag measured %s (IMU stamps %.0f ms late): fixes placed with it",
+            "GNSS receiver 0: lag measured %s (IMU stamps %.0f ms late): fixes carried to it",
             said,
             m.imu_offset_s * 1000.0,
         )
@@ -676,7 +658,9 @@ class Pipeline:
         return self._encode(alert)
 
     def _encode(self, out: Output) -> list[bytes]:
-        if isinstance(out, Alert):
+        if type(out) is NavSolution:  # the ramp of a new lag steps by its accuracy
+            self.lags.solution_h_acc_m = out.h_acc_m  # type: ignore[union-attr]
+        elif isinstance(out, Alert):
             self.alerts.append(out)
             log.warning("CMP %s %s", out.code.value, out.text)
         stats = self.stats

@@ -58,6 +58,7 @@ from companion.engine.bridge_choice import BridgeEvidence, inertial_accel_sigma_
 from companion.engine.config import EngineConfig
 from companion.engine.navigators import Navigators
 from companion.engine.publish import Publisher, publication_time_s, tick
+from companion.engine.self_change import NoiseWatch, reseed
 from companion.engine.silence import StreamWatch
 from companion.engine.tilt_aiding import TiltAiding
 from companion.integrity.coast import CoastConfig, InertialCoast
@@ -302,6 +303,7 @@ class Engine:
             if self.config.imu_grade_check and self._grade_narrower_than_mems()
             else None
         )
+        self._noise_watch = NoiseWatch(self._imu_innovation_config.min_ratio)
         self._imu_source: tuple[str, int] | None = None
         self._raw: RawSolution | None = None
         """The raw receiver's latest carrier-phase solution (a redundant solution)."""
@@ -504,6 +506,12 @@ class Engine:
                 elif out.code is AlertCode.HDG_UNDONE:
                     self._heading_undone()
 
+    def self_change(self, t_s: float, kind: str, text: str, receiver_id: int | None = None) -> None:
+        """The service changed itself at ``t_s`` (``kind``: lag, stamp, noise, grade, reset;
+        ``text``: what, by how much; ``receiver_id``: whose fixes it concerns): what that
+        invalidates is re-seeded and never blamed on a receiver (:mod:`.self_change`)."""
+        reseed(self, t_s, kind, text, receiver_id)
+
     # ------------------------------------------------------------------ handlers
 
     def _on_imu(self, sample: ImuSample) -> list[Output]:
@@ -587,6 +595,7 @@ class Engine:
         self.imu_innovations = None
         self.integrity.stats["imu_grade_widened"] += 1
         self._restart_navigation()
+        self.self_change(t_s, "grade", why)
         text = f"{why}: widened to mems, restart; receiver not blamed"
         log.warning("t=%.2f s IMU grade doubted: %s", t_s, text)
         return [Alert(t_s, AlertCode.IMU_GRADE, Severity.WARNING, text)]
@@ -803,6 +812,9 @@ class Engine:
         if probing:
             self.bridge_evidence.before_fusion(meas, blend)  # type: ignore[arg-type]
         update = navs.on_gnss(meas, verdict.gate)
+        moved = self._noise_watch.moved(navs.primary) if update.fused else ""
+        if moved:  # the blend's measured IMU noise (counted and logged)
+            self.self_change(fix.t_s, "noise", moved)
         if probing and update.fused:
             self.bridge_evidence.after_fusion(meas, blend)  # type: ignore[arg-type]
         if probing and verdict.gate:
@@ -952,6 +964,7 @@ class Engine:
         self.stats.gnss["reinitialised"] += 1
         self.publisher.last_fused_fix = fix
         self._fix_fused = True
+        self.self_change(fix.t_s, "reset", f"navigator re-initialised to rx{fix.receiver_id}")
         return list(self.outage.reinitialised(fix.t_s))
 
     def _fuse_receiver(self, fix: GnssFix) -> bool:

@@ -4,16 +4,28 @@ and over the autopilot's parameter where that disagrees.
 Each ``window_s`` of fixes gives one estimate (:mod:`companion.nav.gnss_lag`) of the
 whole lag (the one in use plus the residual); the windows do not overlap and are
 combined by their inverse variances, the sigma widened by the windows' own scatter where
-it exceeds their sigmas (Birge's ratio). Once the combination has ``min_windows`` windows
-and a sigma under ``max_sigma_s``, and differs from the lag in use by more than
-``max(k_sigma sigma, min_change_s)``, :meth:`LagTracker.take` hands it out once: the pipeline
-places the fixes with it (announcing it where the autopilot's parameter says otherwise).
+it exceeds their sigmas (Birge's ratio). A lag is switched in only on evidence that stays
+convincing over several windows. Windows that gave an estimate are gathered, in order, into
+*verdicts*: a verdict closes as soon as the windows gathered are convincing (combined,
+surer than ``max_sigma_s`` and differing from the lag in use by more than ``k`` of their
+sigma plus a margin for the IMU stamps' offset, below, and by ``min_change_s``), or, after
+``group_windows`` windows that are not, as a "no" that breaks the chain (a weak window
+does not break it, nor make it). Once ``verdicts`` consecutive verdicts say the same way
+and agree with each other, :meth:`LagTracker.take` hands out their combination. The
+verdicts use disjoint windows; each is looked at up to ``group_windows`` times, so with
+the lag in use right a verdict passes one way with probability ``group_windows Phi(-k)``
+at most, a chain of them ``2 (group_windows Phi(-k))^verdicts``: ``k`` is chosen so that
+this is half of ``false_switch_prob`` (:func:`switch_threshold`). The pipeline then
+carries the fixes to it (:mod:`companion.engine.lag_control`; announced where the
+autopilot's parameter says otherwise).
 
 The estimator measures the lag against the IMU's stamps; those may be late themselves
 (filtered readings, stamped when sent). Their offset against the attitude stream is
 measured alongside (:mod:`companion.nav.imu_stamp`, windows of their own combined the
 same way) and added: the lag handed out is against the attitude's clock, which the
-service's outputs carry.
+service's outputs carry. Until it is measured it is taken as 0 +/- ``offset_prior_s``,
+and a verdict must then clear ``z`` times that more (the other half of
+``false_switch_prob``).
 
 Pure: samples in, a decision out.
 """
@@ -23,6 +35,8 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+
+from scipy.stats import chi2, norm
 
 from companion.nav.gnss_lag import GnssLagEstimator, LagConfig
 from companion.nav.imu_stamp import ImuStampEstimator, StampOffsetConfig
@@ -42,13 +56,30 @@ class MeasuredLag:
 @dataclass(frozen=True, slots=True)
 class LagTrackerConfig:
     window_s: float = 20.0
-    min_windows: int = 3
+    group_windows: int = 3
+    """A verdict gathers at most this many windows before it says "no"."""
+    verdicts: int = 3
+    """Consecutive verdicts that must each say the same before a lag is switched in."""
+    false_switch_prob: float = 1e-5
+    """Probability that a lag is switched in while the one in use is right (the windows'
+    sigmas honest), split in two halves: the IMU stamps' offset off by more than the
+    margin allowed for it (``z`` of its sigma, ``2 Phi(-z)`` = half), and a chain of
+    ``verdicts`` each beyond ``k`` of its sigma the same way at one of its looks
+    (``2 (group_windows Phi(-k))^verdicts`` = half): k = 2.61, z = 4.56. One verdict
+    per window at most (20 s): 1.8e-3 false switches per flight hour at most."""
+    offset_prior_s: float = 0.01
+    """The IMU stamps' offset before it is measured (or while its sigma is over
+    ``max_offset_sigma_s``): 0 +/- this (1-sigma). ArduPilot's 20 Hz second-order
+    accelerometer and gyro filters delay the readings by 11 ms (their group delay
+    sqrt(2) / (2 pi f_c)); SITL measured 11.5 ms. So before it is known a lag is switched
+    in only beyond a 46 ms margin (z of this)."""
+    consistency_prob: float = 1e-3
+    """The verdicts must agree with each other: their chi-square about their combination
+    below its ``1 - consistency_prob`` quantile (a bias that wanders, not a lag)."""
     max_sigma_s: float = 0.02
     min_change_s: float = 0.01
-    k_sigma: float = 2.0
-    """The measurement replaces the lag in use when they differ by more than this many
-    sigmas: choosing between two values, the measurement's expected squared error is
-    sigma^2, the other's (difference^2 - sigma^2), smaller only below sqrt(2) sigma."""
+    """A lag closer than this to the one in use is not switched in (a tenth of a 10 Hz
+    fix interval)."""
     max_lag_s: float = 0.5
     offset_window_s: float = 30.0
     """The IMU stamp offset's windows."""
@@ -61,6 +92,8 @@ class LagTracker:
     the attitude at its time) and combines its windows."""
 
     MAX_PENDING = 50
+    MAX_REJUDGED = 30
+    """Windows judged again when the IMU stamps' offset becomes known (ten minutes)."""
 
     def __init__(self, config: LagTrackerConfig | None = None) -> None:
         self.config = config or LagTrackerConfig()
@@ -74,7 +107,22 @@ class LagTracker:
         self._window_start_s: float | None = None
         self._windows: list[tuple[float, float]] = []
         """(whole lag, sigma) of each window that gave an estimate, s."""
-        self._handed: MeasuredLag | None = None
+        self._group: list[tuple[float, float]] = []
+        """The windows of the verdict being gathered."""
+        self._verdicts: list[MeasuredLag] = []
+        """The chain of convincing verdicts, the same way, since the last "no" or change
+        of the lag in use (against the attitude's clock)."""
+        self._ready: MeasuredLag | None = None
+        """A lag the chain has made, not handed out yet."""
+        self._since: deque[tuple[float, float]] = deque(maxlen=self.MAX_REJUDGED)
+        """The windows since the lag in use last changed (judged again, once, when the IMU
+        stamps' offset becomes known)."""
+        self._offset_known = False
+        half = 0.5 * self.config.false_switch_prob
+        self.k_switch = switch_threshold(half, self.config.verdicts, self.config.group_windows)
+        """How many of its sigmas each verdict must differ by."""
+        self.z_offset = float(norm.isf(0.5 * half))
+        """How many of its sigmas the IMU stamps' offset may be off by."""
         self.last: MeasuredLag | None = None
         """The combination so far, against the IMU's stamps (None before a window gave an
         estimate)."""
@@ -83,10 +131,18 @@ class LagTracker:
         self._offset_windows: list[tuple[float, float]] = []
         self.imu_offset: MeasuredLag | None = None
         """The IMU stamps' offset against the attitude's so far (combined windows)."""
+        self._offset_taken: MeasuredLag | None = None
+        """The offset last taken in (:meth:`take_offset`)."""
 
     def restart(self, lag_in_use_s: float) -> None:
         """The stamps' lag changed (or the autopilot rebooted): the window starts over; the
-        windows already combined stay (they measured the whole lag)."""
+        windows already combined stay (they measured the whole lag), the verdicts judged
+        against the lag in use start again."""
+        if lag_in_use_s != self.lag_in_use_s:
+            self._verdicts.clear()
+            self._group = []
+            self._ready = None
+            self._since.clear()
         self.lag_in_use_s = lag_in_use_s
         self.estimator.reset()
         self._window_start_s = None
@@ -113,6 +169,25 @@ class LagTracker:
             if est is not None:
                 self._offset_windows.append((est.offset_s, est.sigma_s))
                 self.imu_offset = combine(self._offset_windows)
+                if not self._offset_known and self._offset()[1] < self.config.offset_prior_s:
+                    # known at last: the windows since the last change judged again with it
+                    # (before, they had to clear the prior's margin)
+                    self._offset_known = True
+                    self._group, self._verdicts = [], []
+                    for window in self._since:
+                        self._judge(window)
+
+    def take_offset(self) -> MeasuredLag | None:
+        """The IMU stamps' offset, once, when it becomes sure enough to be added to the lag
+        (``max_offset_sigma_s``) or moves by more than that from the one taken before."""
+        off, cfg = self.imu_offset, self.config
+        if off is None or off.sigma_s > cfg.max_offset_sigma_s:
+            return None
+        taken = self._offset_taken
+        if taken is not None and abs(off.lag_s - taken.lag_s) <= cfg.max_offset_sigma_s:
+            return None
+        self._offset_taken = off
+        return off
 
     def on_imu(self, s: ImuSample) -> None:
         if self._imu_id is None:
@@ -161,10 +236,61 @@ class LagTracker:
         est = self.estimator.estimate()
         self.estimator.reset()
         self._window_start_s = s.t_s
-        if est is None:
-            return
-        self._windows.append((self.lag_in_use_s + est.lag_s, est.sigma_s))
+        if est is not None:
+            self.add_window(self.lag_in_use_s + est.lag_s, est.sigma_s)
+
+    def add_window(self, lag_s: float, sigma_s: float) -> None:
+        """One window's estimate of the whole lag (s, against the IMU's stamps): into the
+        combination, and into the verdict being gathered (module docstring)."""
+        window = (lag_s, sigma_s)
+        self._windows.append(window)
         self.last = combine(self._windows)
+        self._since.append(window)
+        self._judge(window)
+
+    def _judge(self, window: tuple[float, float]) -> None:
+        """One window into the verdict being gathered, and the chain (module docstring)."""
+        cfg = self.config
+        self._group.append(window)
+        gathered = combine(self._group)
+        offset_s, offset_sd = self._offset()
+        diff = gathered.lag_s + offset_s - self.lag_in_use_s
+        convincing = gathered.sigma_s <= cfg.max_sigma_s and abs(diff) > max(
+            self.k_switch * gathered.sigma_s + self.z_offset * offset_sd, cfg.min_change_s
+        )
+        if not convincing:
+            if len(self._group) >= cfg.group_windows:  # a "no": the chain starts again
+                self._group = []
+                self._verdicts.clear()
+            return
+        self._group = []
+        verdict = MeasuredLag(gathered.lag_s + offset_s, gathered.sigma_s, gathered.windows)
+        chain = self._verdicts
+        if chain and (chain[-1].lag_s > self.lag_in_use_s) != (diff > 0.0):
+            chain.clear()  # the other way
+        chain.append(verdict)
+        del chain[: -cfg.verdicts]
+        if len(chain) < cfg.verdicts:
+            return
+        merged = combine([(v.lag_s, v.sigma_s) for v in chain])
+        spread = sum(((v.lag_s - merged.lag_s) / v.sigma_s) ** 2 for v in chain)
+        if spread > chi2.isf(cfg.consistency_prob, len(chain) - 1):
+            del chain[0]  # they disagree: the oldest goes, the chain waits for another
+            return
+        if not 0.0 <= merged.lag_s <= cfg.max_lag_s:
+            return
+        windows = sum(v.windows for v in chain)
+        chain.clear()
+        self._ready = MeasuredLag(
+            merged.lag_s, math.hypot(merged.sigma_s, offset_sd), windows, offset_s
+        )
+
+    def _offset(self) -> tuple[float, float]:
+        """The IMU stamps' offset and its sigma: measured once sure enough, else the prior."""
+        off, cfg = self.imu_offset, self.config
+        if off is not None and off.sigma_s <= cfg.max_offset_sigma_s:
+            return off.lag_s, off.sigma_s
+        return 0.0, cfg.offset_prior_s
 
     def measured(self) -> MeasuredLag | None:
         """The combined lag against the attitude's clock: the IMU stamps' offset added
@@ -177,18 +303,17 @@ class LagTracker:
         )
 
     def take(self) -> MeasuredLag | None:
-        """The measured lag, once, when it is sure and differs from the one in use."""
-        cfg, m = self.config, self.measured()
-        if m is None or m.windows < cfg.min_windows or m.sigma_s > cfg.max_sigma_s:
-            return None
-        if not 0.0 <= m.lag_s <= cfg.max_lag_s:
-            return None
-        if abs(m.lag_s - self.lag_in_use_s) <= max(cfg.k_sigma * m.sigma_s, cfg.min_change_s):
-            return None
-        if self._handed is not None and abs(m.lag_s - self._handed.lag_s) <= cfg.min_change_s:
-            return None
-        self._handed = m
-        return m
+        """The lag a chain of verdicts made (module docstring), once; None otherwise."""
+        ready, self._ready = self._ready, None
+        return ready
+
+
+def switch_threshold(false_switch_prob: float, verdicts: int, looks: int = 1) -> float:
+    """How many of its sigmas each of ``verdicts`` independent verdicts, each looked at up
+    to ``looks`` times, must differ by for a chain of them, all the same way, to pass with
+    probability ``false_switch_prob`` when there is nothing to find (a union bound over the
+    looks): ``2 (looks Phi(-k))^verdicts = false_switch_prob``."""
+    return float(norm.isf((0.5 * false_switch_prob) ** (1.0 / verdicts) / looks))
 
 
 def combine(windows: list[tuple[float, float]]) -> MeasuredLag:

@@ -229,6 +229,11 @@ class InertialCoast:
         self._last_anchor_t = -math.inf
         self._restack()
 
+    def drop_slots(self, reason: str) -> None:
+        """Drop every slot (their anchors came from a navigator the service has since
+        changed: :mod:`companion.engine.self_change`); they re-anchor as they come due."""
+        self._drop_slots(reason)
+
     def _drop_slots(self, reason: str) -> None:
         if any(s is not None for s in self._slots):
             self.stats[f"slots_dropped_{reason}"] += 1

@@ -37,6 +37,7 @@ from collections.abc import Mapping
 
 from companion.integrity.config import IntegrityConfig
 from companion.integrity.fde.detector import FaultDetector, FixCheck
+from companion.integrity.fde.fix_tests import FixTests
 from companion.integrity.protection.alerts import AlertState
 from companion.integrity.protection.levels import ProtectionLevels
 from companion.integrity.protection.limits import AlertLimit, ApproachCategory, FlightPhase
@@ -82,12 +83,56 @@ class IntegrityMonitor:
         """Protection levels, integrity and category of the published solution."""
         self.k_h = self.protection.k_h
         self.k_v = self.protection.k_v
+        self._excused_until_s: dict[int | None, float] = {}
+        """Per receiver (None: every one), until when its fix-level failures are the
+        service's own doing (:meth:`service_changed`)."""
+        self._excuse_tests = FixTests(self.config.false_alarm_prob, Counter())
+        """The fix-level tests run again on an excused fix (their own counters)."""
 
     def reset(self) -> None:
         """Forget everything but ``stats`` (autopilot reboot)."""
         self.fde.reset()
         self.protection.reset()
         self.spoof.reset()
+        self._excused_until_s.clear()
+
+    # ------------------------------------------------------------------ the service's own changes
+
+    def service_changed(
+        self,
+        t_s: float,
+        reason: str,
+        receivers: list[int] | None = None,
+        horizon_s: float | None = None,
+        *,
+        series: bool = True,
+    ) -> None:
+        """The service changed itself at ``t_s`` (``reason``, for the log: the lag it places
+        a receiver's fixes with, a reset of the navigator, its IMU grade ...).
+
+        What the change invalidates is re-seeded: the separation series of ``receivers``
+        (None: every receiver) start again and forget their latest results (unless
+        ``series`` is False: a change of the navigator alone leaves the receivers'
+        comparisons with each other valid), and their innovation memory is cleared
+        (:meth:`FaultDetector.reseed`). Until ``t_s +
+        horizon_s`` (default: one separation window, the series' memory) a failed
+        fix-level test of theirs (the navigator's innovation, the potential filter's
+        ellipsoid) is not attributed to the receiver: counted (``self_change_excused``),
+        logged, and the fix tested as if the navigator had not been offered it. The
+        separation tests run on: their series hold only what came after the change.
+        """
+        self.fde.reseed(receivers, series=series)
+        horizon = self.config.separation_window_s if horizon_s is None else horizon_s
+        keys: list[int | None] = [None] if receivers is None else list(receivers)
+        for key in keys:
+            until = max(self._excused_until_s.get(key, -math.inf), t_s + horizon)
+            self._excused_until_s[key] = until
+        self.stats["self_changes"] += 1
+        log.info("t=%.2f s service changed itself (%s): tests re-seeded", t_s, reason)
+
+    def _excused(self, receiver_id: int, t_s: float) -> bool:
+        until = self._excused_until_s
+        return t_s < until.get(receiver_id, -math.inf) or t_s < until.get(None, -math.inf)
 
     # ------------------------------------------------------------------ fault detection
 
@@ -145,6 +190,19 @@ class IntegrityMonitor:
             baro = None
         if baro is None:
             self.fde.pairs.restart_baro()
+        if (update is not None or predicted is not None) and self._excused(
+            fix.receiver_id, meas.t_s
+        ):
+            _, failures = self._excuse_tests.run(meas, update, predicted)
+            if failures:
+                self.stats["self_change_excused"] += 1
+                log.info(
+                    "t=%.2f s rx%d: %s, after a change of the service's own: not attributed",
+                    meas.t_s,
+                    fix.receiver_id,
+                    "; ".join(failures),
+                )
+                update, predicted = None, None
         outputs = self.fde.on_fix(fix, meas, update, predicted, references, baro)
         if outputs and self.spoof.excluded(fix.receiver_id):
             # the receiver is held out as spoofed, said once by SPOOF: its tests' failures

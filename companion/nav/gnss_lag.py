@@ -44,7 +44,10 @@ class LagEstimate:
     residual_mps: float
     """RMS of the velocity-change residual at the estimate."""
     excitation_mps2: float
-    """RMS change of the horizontal acceleration between fixes (what makes it observable)."""
+    """RMS change of the horizontal acceleration between fixes that a heading error does
+    not explain (what makes the lag observable), m/s^2."""
+    rotation_rad: float = 0.0
+    """The blocks' mean heading error at the estimate (the acceleration's rotation), rad."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,8 +69,17 @@ class LagConfig:
     smooth_s: float = 0.05
     """Half-width of the lag difference the model's slope is taken over, s."""
     blocks: int = 4
-    """The window is cut into this many blocks, each with its own bias; the scatter of
-    their lags bounds the estimate's sigma from below."""
+    """The window is cut into this many blocks, each with its own bias and heading error;
+    the scatter of their lags bounds the estimate's sigma from below."""
+    heading_prior_rad: float = 0.1
+    """Prior 1-sigma of a block's heading error (a rotation of the acceleration, which a
+    body-axis accelerometer bias in a turn also looks like), weighed against
+    ``velocity_noise_mps``: 6 deg, far beyond a MEMS autopilot's tenths, so it decides
+    nothing in turns; on a straight leg, where the rotation is unobservable, it keeps it
+    at zero."""
+    velocity_noise_mps: float = 0.05
+    """The velocity-change noise the heading prior is weighed against (a receiver's
+    Doppler velocity, 1-sigma per axis), m/s."""
 
 
 class GnssLagEstimator:
@@ -143,44 +155,105 @@ class GnssLagEstimator:
             axis=-1,
         )
         resid = dv[None, :, :] - d_int
-        # each block of the window has its own constant bias b_ne (least squares, regressor
-        # dt); the blocks' own minima measure how much the lag moves with what the model
-        # leaves out (attitude error, vibration), which Fisher's sigma cannot see
+        # the model's slope in the lag at every lag of the grid, over +-smooth_s (the
+        # acceleration averaged over 2 smooth_s: a single vibrating sample says nothing
+        # about the motion)
+        h = max(1, round(cfg.smooth_s / cfg.step_s))
+        k_all = np.arange(lags.size)
+        lo_k, hi_k = np.maximum(k_all - h, 0), np.minimum(k_all + h, lags.size - 1)
+        slope_all = (d_int[lo_k] - d_int[hi_k]) / (lags[hi_k] - lags[lo_k])[:, None, None]
+        # each block of the window has its own constant bias b_NE and its own heading error
+        # (a rotation of the acceleration, which a body-axis accelerometer bias also looks
+        # like in a turn): both solved by least squares at every lag. In a steady turn a
+        # rotation and a lag are the same (the acceleration turns at the turn's rate): the
+        # lag is then not observable, and the slope left once the rotation is projected out
+        # says so (the excitation and Fisher's information vanish)
         blocks = np.array_split(np.arange(n), cfg.blocks)
+        ridge = (cfg.velocity_noise_mps / cfg.heading_prior_rad) ** 2
         costs = np.empty((len(blocks), lags.size))
+        block_info = np.empty((len(blocks), lags.size))
+        rotation = np.zeros((len(blocks), lags.size))
         for j, idx in enumerate(blocks):
-            r, w = resid[:, idx, :], dt[idx]
-            b = np.einsum("lka,k->la", r, w) / float(w @ w)
-            r = r - b[:, None, :] * w[None, :, None]
-            costs[j] = np.einsum("lka,lka->l", r, r)
+            costs[j], block_info[j], rotation[j] = _profile(
+                resid[:, idx], d_int[:, idx], slope_all[:, idx], dt[idx], ridge
+            )
+        info_l = block_info.sum(axis=0)
         cost = costs.sum(axis=0)
         lag, on_edge = _minimum(lags, cost)
-        block_lags = [_minimum(lags, c)[0] for c in costs]
-        # the model's slope in the lag, over +-smooth_s (the acceleration averaged over
-        # 2 smooth_s: a single vibrating sample says nothing about the motion)
         k = int(np.argmin(np.abs(lags - lag)))
-        h = max(1, round(cfg.smooth_s / cfg.step_s))
-        lo, hi = max(k - h, 0), min(k + h, lags.size - 1)
-        jerk = (d_int[lo] - d_int[hi]) / float(lags[hi] - lags[lo])
-        excitation = float(np.sqrt(np.mean(np.sum(jerk * jerk, axis=1))))
+        excitation = math.sqrt(max(float(info_l[k]), 0.0) / n)
         i = int(np.argmin(cost))
-        var_r = float(cost[i]) / max(2 * (n - len(blocks)), 1)
+        var_r = float(cost[i]) / max(2 * n - 3 * len(blocks), 1)
         # overlapping pairs share fixes and accelerations: the information of as many
         # independent pairs as disjoint baselines fit in the window
         overlap = max(1.0, n * cfg.baseline_s / max(float(t1[-1] - t0[0]), cfg.baseline_s))
-        info = float(np.sum(jerk * jerk)) / (2.0 * var_r * overlap) if var_r > 0.0 else math.inf
-        if on_edge or excitation < cfg.min_excitation_mps2 or not info > 0.0:
+        scale = 2.0 * var_r * overlap
+        if on_edge or excitation < cfg.min_excitation_mps2 or not scale > 0.0:
             return None
-        sigma = max(
-            1.0 / math.sqrt(info), float(np.std(block_lags, ddof=1)) / math.sqrt(len(blocks))
-        )
+        info = float(info_l[k]) / scale
+        if not info > 0.0:
+            return None
+        # the blocks' own minima, weighted by their own information (a block without a
+        # manoeuvre has a flat cost and says nothing): their scatter beyond what that
+        # information allows (Birge's ratio) is what the model leaves out (an attitude
+        # error in turns), which Fisher's sigma cannot see
+        chi2_blocks, informative = 0.0, 0
+        for c, info_j in zip(costs, block_info, strict=True):
+            lag_j, edge_j = _minimum(lags, c)
+            w_j = float(info_j[int(np.argmin(np.abs(lags - lag_j)))]) / scale
+            if edge_j or not w_j > 0.0:
+                continue
+            informative += 1
+            chi2_blocks += w_j * (lag_j - lag) ** 2
+        birge = math.sqrt(chi2_blocks / (informative - 1)) if informative > 1 else 1.0
+        sigma = max(1.0, birge) / math.sqrt(info)
         return LagEstimate(
             lag_s=lag,
             sigma_s=sigma,
             n_fixes=n,
             residual_mps=math.sqrt(var_r),
             excitation_mps2=excitation,
+            rotation_rad=float(np.mean(rotation[:, k])),
         )
+
+
+def _profile(
+    resid: FloatArray, d_int: FloatArray, slope: FloatArray, dt: FloatArray, ridge: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """One block at every lag: the residual sum of squares with its bias and heading error
+    solved for, the lag's information left once they are (the squared slope projected
+    off their regressors), and the heading error, rad.
+
+    ``resid``, ``d_int``, ``slope``: (lags, pairs, 2) velocity-change residuals, the
+    acceleration integrals and their slope in the lag; ``dt`` (pairs,) the intervals. The
+    heading error ``psi`` rotates the integrals, ``d + psi J d`` with ``J d = (-d_E, d_N)``
+    (small angles); the bias adds ``b dt``; ``ridge`` ((m/s)^2 per rad^2) is the heading's
+    prior weight (a straight, steady leg leaves it unobservable: it then stays ~0).
+    """
+    rot = np.stack([-d_int[..., 1], d_int[..., 0]], axis=-1)  # J d, (L, K, 2)
+    w2 = float(dt @ dt)
+    # normal equations of (b_N, b_E, psi), (L, 3, 3)
+    a = np.zeros((d_int.shape[0], 3, 3))
+    a[:, 0, 0] = a[:, 1, 1] = w2
+    a[:, 0, 2] = a[:, 2, 0] = np.einsum("lk,k->l", rot[..., 0], dt)
+    a[:, 1, 2] = a[:, 2, 1] = np.einsum("lk,k->l", rot[..., 1], dt)
+    a[:, 2, 2] = np.einsum("lka,lka->l", rot, rot) + ridge
+
+    def project(y: FloatArray) -> tuple[FloatArray, FloatArray]:
+        c = np.stack(
+            [
+                np.einsum("lk,k->l", y[..., 0], dt),
+                np.einsum("lk,k->l", y[..., 1], dt),
+                np.einsum("lka,lka->l", rot, y),
+            ],
+            axis=-1,
+        )
+        theta = np.linalg.solve(a, c[..., None])[..., 0]
+        return np.einsum("lka,lka->l", y, y) - np.einsum("li,li->l", c, theta), theta
+
+    cost, theta = project(resid)
+    info, _ = project(slope)
+    return cost, info, theta[:, 2]
 
 
 def _minimum(lags: FloatArray, cost: FloatArray) -> tuple[float, bool]:

@@ -235,6 +235,10 @@ class OutageMonitor:
     _resets_unalerted: int = 0
     rhythm: FixRhythm = field(default_factory=FixRhythm)
     """The link's rhythm of fixes: slow or not (kept by the engine across restarts)."""
+    resets_self_change: int = 0
+    """... of which came within the horizon of a change the service made to itself (not
+    alerted: :meth:`service_changed`)."""
+    _self_change_until_s: float = -math.inf
 
     # ------------------------------------------------------------------ per fix
 
@@ -312,7 +316,11 @@ class OutageMonitor:
             self.resets += 1
             log.warning("t=%.2f s: %s (ends the outage)", t, why)
         elif reinit:
-            if within_bound is not None and within_bound(fix):
+            if t < self._self_change_until_s:
+                self.resets += 1
+                self.resets_self_change += 1
+                log.info("t=%.2f s: %s (after a change of the service's own: not alerted)", t, why)
+            elif within_bound is not None and within_bound(fix):
                 self.resets += 1
                 self.resets_within_bound += 1
                 log.info("t=%.2f s: %s (within the solution's bound: not alerted)", t, why)
@@ -381,6 +389,19 @@ class OutageMonitor:
             rx.rejected_fixes = 0
             rx.unvouched = False
             rx.last_used_t_s = fix.t_s
+
+    def service_changed(self, t_s: float, receiver_id: int | None, horizon_s: float) -> None:
+        """The service changed itself at ``t_s`` (the lag it places a receiver's fixes
+        with, a reset of the navigator, its IMU grade): the rejection clock of that
+        receiver (None: of every one) starts again (its rejections measured the service as
+        it was), and a reset to a receiver within ``horizon_s`` is the service's own doing,
+        not a fault: counted (``resets_self_change``) and logged, not alerted."""
+        for rid, rx in self._receivers.items():
+            if receiver_id is None or rid == receiver_id:
+                rx.rejected_since_t_s = None
+                rx.rejected_fixes = 0
+                rx.unvouched = False
+        self._self_change_until_s = max(self._self_change_until_s, t_s + horizon_s)
 
     def rejected_for_s(self, receiver_id: int, t_s: float) -> float:
         """How long the navigator has been rejecting this receiver at ``t_s`` (0: not)."""
@@ -537,6 +558,7 @@ class OutageMonitor:
         self._gated_ok = 0
         self._gated_rejects = 0
         self._degraded = False
+        self._self_change_until_s = -math.inf
 
     def receiver_usable(self, receiver_id: int) -> bool:
         """False while a receiver is stale."""

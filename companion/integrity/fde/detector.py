@@ -113,6 +113,20 @@ class FaultDetector:
         rx.alerted = False
         rx.last_nis = 0.0
 
+    def reseed(self, receiver_ids: list[int] | None = None, *, series: bool = True) -> None:
+        """The service changed itself (:meth:`IntegrityMonitor.service_changed`): the
+        separation series of these receivers (None: every one seen) restart (unless
+        ``series`` is False) and their innovation memory is forgotten (it measured them
+        against the service as it was)."""
+        ids = list(self._receivers) if receiver_ids is None else receiver_ids
+        for rid in ids:
+            if series:
+                self.pairs.restart_receiver(rid, reason="self_change")
+            rx = self._receivers.get(rid)
+            if rx is not None:
+                rx.last_nis = 0.0
+                rx.last_nis_t_s = -math.inf
+
     @property
     def fault_detected(self) -> bool:
         """True while a fault is unresolved or any receiver is excluded."""

@@ -71,13 +71,16 @@ class PairSeparations:
         self._vertical: dict[PairKey, VerticalSeparation] = {}
         self._baro_epoch: dict[PairKey, int] = {}
 
-    def restart_receiver(self, receiver_id: int) -> None:
-        """Restart every separation series of a receiver (its fix type changed).
+    def restart_receiver(self, receiver_id: int, reason: str = "fix_type") -> None:
+        """Restart every separation series of a receiver (its fix type changed, or the
+        service changed how it places the receiver's fixes: ``reason`` "self_change").
 
         The window tests assume one error process over the window; a change of fix type
         (RTK fixed to float, float to 3-D, back) changes the receiver's error and its
         stated accuracy at once, a jump that is not a fault (as Kim, Walter and Powell
-        keep one satellite set per approach: a change causes jumps)."""
+        keep one satellite set per approach: a change causes jumps). A self-change also
+        forgets the series' latest results, the evidence attribution reads: they measured
+        the receiver as it was placed before."""
         tag = f"rx{receiver_id}"
         for key, tracker in self._trackers.items():
             if tag in key:
@@ -85,7 +88,10 @@ class PairSeparations:
         for key, vertical in self._vertical.items():
             if tag in key:
                 vertical.reset()
-        self.stats["series_restarted_fix_type"] += 1
+        if reason != "fix_type":
+            for key in [k for k in self.latest if tag in k]:
+                del self.latest[key]
+        self.stats[f"series_restarted_{reason}"] += 1
 
     def rotate(self, rot: FloatArray) -> None:
         """Re-express every series with a (3, 3) frame rotation (the engine re-anchored)."""
