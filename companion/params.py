@@ -415,7 +415,6 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SPF_WANDER", "spoof.wander_prior_m2ps5"),
     ("SPF_WANDER_TAU", "spoof.wander_tau_s"),
     ("SPF_LAG_SIGMA", "spoof.lag_sigma_s"),
-    ("SPF_LAG_FLOOR", "spoof.lag_sigma_floor_s"),
     ("SPF_ATT_TIME", "spoof.attitude_time_sigma_s"),
     ("SPF_ACC_SMOOTH", "spoof.accel_smoothing_s"),
     ("SPF_VRW_FLOOR", "spoof.acc_vrw_floor_m2ps3"),
@@ -424,6 +423,7 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SPF_READMIT", "spoof.readmit_s"),
     ("SPF_READMIT_PFA", "spoof.readmit_false_alarm_prob"),
     ("SPF_CALM", "spoof.calm_s"),
+    ("SPF_LAG_FLOOR", "spoof.lag_sigma_floor_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

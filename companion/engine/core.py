@@ -867,8 +867,8 @@ class Engine:
 
     @property
     def gnss_lag_sigma_s(self) -> float | None:
-        """How far receiver 0's fixes may be misplaced in time against the IMU, s (None:
-        not measured): set by the pipeline from the lag it measures, for the spoofing
+        """What is not known of receiver 0's fix placement against the IMU, s (None: not
+        measured): set by the pipeline from the lag it measures, for the spoofing
         monitor's test (a misplaced fix moves by its acceleration times the error)."""
         return self.integrity.spoof.lag_sigma_s
 

@@ -85,12 +85,12 @@ class SpoofConfig:
     """Memory of the wander's measurement, s: it follows the vehicle within minutes."""
     lag_sigma_s: float = ranged(0.2, ge=0.0)
     """1-sigma of what is not known of the fixes' time of validity against the IMU's (a
-    GNSS lag not yet measured: receivers and autopilots differ by 0.1-0.25 s), s: the
-    velocity separation gains it times the change of the acceleration since the anchor.
-    The service measures receiver 0's lag in flight (:mod:`companion.engine.gnss_lag`);
-    from then on the measurement's uncertainty replaces this ..."""
+    GNSS lag not yet measured: receivers and autopilots differ by 0.1-0.25 s), s: a
+    misplaced fix moves the velocity by the acceleration times it. Once the service has
+    measured receiver 0's lag (:mod:`companion.engine.gnss_lag`) the measurement's own
+    uncertainty (its difference from the lag in use, or its sigma) replaces it ..."""
     lag_sigma_floor_s: float = ranged(0.02, ge=0.0)
-    """... once the lag is measured, its uncertainty is taken as at least this, s."""
+    """... at least this, s."""
     attitude_time_sigma_s: float = ranged(0.05, ge=0.0)
     """1-sigma of the attitude's time against the IMU's, s (a stream's own lag, a stamp
     offset): in a turn the specific force is rotated by omega times it, which the test

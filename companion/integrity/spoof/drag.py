@@ -10,16 +10,29 @@ which, for an honest receiver, is the initial velocity plus what the IMU's error
 integrate to: a NED bias ``b_n`` (the autopilot's tilt error times g) and a body-frame
 accelerometer bias ``b_b`` (``dV = -dW b_b``, :mod:`.inertial`), random walks at the
 rates of the IMU grade, plus the IMU's white noise (its measured vibration) and the
-receiver's velocity noise. A small Kalman filter on the state
+receiver's velocity noise; and, where the fix is placed ``delta`` later than it was valid
+(a lag not yet measured, or measured slightly wrong), ``-a(t) delta`` (``a``: the IMU's
+acceleration), with ``delta = sigma_lag u``: ``sigma_lag`` is what is not known of the
+placement, ``u`` a unit-variance constant. What the service itself changes of the
+placement, ``delta_s``, is known: the separation from a reference anchored at ``t_a``
+moves by ``a(t_a) (delta_s(t) - delta_s(t_a))``, which is taken out, as is its step
+between consecutive fixes from the filter. A small Kalman filter on the state
 
-    x = [d_N, d_E, b_n,N, b_n,E, b_b,x, b_b,y, b_b,z]
+    x = [d_N, d_E, b_n,N, b_n,E, b_b,x, b_b,y, b_b,z, u]
 
-follows it. Every ``anchor_interval_s`` while nothing is suspected the filter's state is
-kept as a *reference*; references up to ``max_window_s`` old are carried forward open
-loop (no fix after their anchor) and each fix is tested against every one:
+follows it, ``u`` a *consider* state (Schmidt-Kalman: never updated, its prior and its
+correlations with the rest carried). A misplaced fix shows in a bank's entry and exit as
+the bias along the body's z axis does (seen horizontally only through the tilt); with
+``u`` considered the filter fits the bias there only by what the misplacement cannot
+explain, and the test is widened by what the misplacement could explain.
 
-    s = z - J x_a,   J = [I, -tau I, -(W(t) - W(t_a))],
-    S = J P_a J^T + (q_vrw tau + (q_n + q_b) tau^3 / 3) I + R + R_slow(tau),
+Every ``anchor_interval_s`` while nothing is suspected the filter's state is kept as a
+*reference*; references up to ``max_window_s`` old are carried forward open loop (no fix
+after their anchor) and each fix is tested against every one:
+
+    s = z - J x_a,   J = [I, -tau I, -(W(t) - W(t_a)), -sigma_lag a(t)],
+    S = J P_a J^T + (q_vrw tau + (q_n + q_b) tau^3 / 3) I + R + R_slow(tau)
+        + (sigma_att (R(t) - R(t_a)))^2 I,
 
 ``T = s^T S^-1 s`` against the chi-square (2 dof) quantile of ``false_alarm_prob``. A drag
 of acceleration ``a`` that began after a reference's anchor shows as ``s = a tau``: the
@@ -54,10 +67,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from companion.integrity.spoof.inertial import Increments
 from companion.integrity.spoof.config import WINDOW_EDGES_S, SpoofConfig
+from companion.integrity.spoof.inertial import Increments
 from companion.types import FloatArray
-
 
 
 @dataclass(slots=True)
@@ -73,6 +85,8 @@ class Anchor:
     inc: Increments
     acc: FloatArray
     payload: object = None
+    placed_s: float = 0.0
+    """The lag the service placed that fix with, s."""
 
     @property
     def w(self) -> FloatArray:
@@ -107,7 +121,25 @@ class DragVerdict:
         return self.tested and self.stat > self.threshold
 
 
+@dataclass(slots=True)
+class _Filter:
+    """The drag filter: state ``x`` (7,) and covariance ``p`` (7, 7) at ``t_s``, the IMU's
+    ``w`` increment then, its integration epoch, and when it started."""
+
+    x: FloatArray
+    p: FloatArray
+    t_s: float
+    w: FloatArray
+    epoch: int
+    start_t_s: float
+
+
 _I2 = np.eye(2)
+N_STATE = 8
+"""``[d_N, d_E, b_n,N, b_n,E, b_b,x, b_b,y, b_b,z, u]``; ``u`` is a consider state: its
+gain is zero (Schmidt-Kalman), the Joseph update keeps the covariance right for that gain."""
+U = 7
+"""Index of ``u``: the fixes' misplacement in time is ``lag_sigma_s * u``."""
 CALM_NIS = float(chi2.isf(1e-3, 2))
 """A fix whose innovation in the filter exceeds this (2 dof, 1e-3) pulls the filter: its
 biases may be learning a disturbance (a failing IMU, a drag), and no reference is kept
@@ -134,8 +166,8 @@ class DragTest:
         n_classes = len(WINDOW_EDGES_S) + 1
         self.threshold = float(chi2.isf(config.false_alarm_prob / n_classes, 2))
         self.lag_sigma_s = config.lag_sigma_s
-        """The fixes' time-placement uncertainty in force, s (the caller's measurement, or
-        the configured prior)."""
+        """What is not known of the fixes' time placement, s (the caller's measurement of
+        the lag, or the configured prior)."""
         self._cal_sum = np.zeros(n_classes)
         self._cal_n = np.zeros(n_classes)
         self._calib = np.full(n_classes, config.calibration_prior)
@@ -148,20 +180,18 @@ class DragTest:
     def reset(self) -> None:
         """Forget the filter and every reference (a new IMU epoch, a reboot). The in-flight
         calibration is kept: it measures the installation, not the moment."""
-        self.x: FloatArray | None = None
-        self.p: FloatArray | None = None
-        self._t: float | None = None
-        self._w: FloatArray | None = None
-        self._epoch: int | None = None
-        self._start_t: float | None = None
+        self.f: _Filter | None = None
+        """The filter (None until the first fix)."""
         self.refs: list[Anchor] = []
         self._last_anchor_t = -math.inf
         self._cal_t: float | None = None
         self._acc = np.zeros(2)
+        self._last_acc = np.zeros(2)
         self._upset_t = -math.inf
         self._r_white = self.config.gnss_vel_floor_mps**2
         self._r_n = 0
         self._last_z: FloatArray | None = None
+        self._placed_s = 0.0
         self.frozen = False
         """References are kept, none added (an episode holds its evidence)."""
 
@@ -172,10 +202,15 @@ class DragTest:
         q_n = max(cfg.tilt_rw_m2ps5, self._q_wander)
         return max(vrw, cfg.acc_vrw_floor_m2ps3), q_n, cfg.acc_bias_rw_m2ps5
 
-    def _start(self, t_s: float, z: FloatArray, inc: Increments) -> None:
+    @property
+    def running(self) -> bool:
+        """The filter has started (since the last reset)."""
+        return self.f is not None
+
+    def _start(self, t_s: float, z: FloatArray, inc: Increments, placed_s: float) -> None:
         cfg = self.config
-        self.x = np.concatenate([z, np.zeros(5)])
-        self.p = np.diag(
+        x = np.concatenate([z, np.zeros(N_STATE - 2)])
+        p = np.diag(
             [
                 self._r_white,
                 self._r_white,
@@ -184,10 +219,12 @@ class DragTest:
                 cfg.acc_bias_sigma_mps2**2,
                 cfg.acc_bias_sigma_mps2**2,
                 cfg.acc_bias_z_sigma_mps2**2,
+                1.0,
             ]
         )
-        self._t, self._w, self._epoch, self._start_t = t_s, inc.w, inc.epoch, t_s
+        self.f = _Filter(x, p, t_s, inc.w, inc.epoch, t_s)
         self.refs = []
+        self._placed_s = placed_s
         self._last_anchor_t = -math.inf
         self._last_z = z
 
@@ -200,6 +237,7 @@ class DragTest:
         vrw_m2ps3: float,
         hold: bool,
         payload: object = None,
+        placed_s: float = 0.0,
     ) -> DragVerdict:
         """Test one fix's velocity, then take it into the filter.
 
@@ -213,56 +251,66 @@ class DragTest:
         vrw_m2ps3 : the IMU's measured white noise PSD (:meth:`InertialIncrements.vrw_psd_m2ps3`).
         hold : something is suspected: no reference is anchored, nothing calibrated.
         payload : kept with the reference anchored at this fix, if one is.
+        placed_s : the lag the service placed the fix with, s (its own change between
+            fixes moves ``z`` by the acceleration times the change: taken out).
         """
         z = np.asarray(vel_ne_mps, dtype=float) - inc.vel[:2]
         none = DragVerdict(t_s, False, 0.0, self.threshold, 0.0, np.zeros(2), np.zeros(2))
-        if self.x is None or inc.epoch != self._epoch or self._t is None or t_s <= self._t:
-            if self._t is None or inc.epoch != self._epoch or t_s > self._t:
-                self._start(t_s, z, inc)
+        f = self.f
+        if f is None or inc.epoch != f.epoch or t_s <= f.t_s:
+            if f is None or inc.epoch != f.epoch:
+                self._start(t_s, z, inc, placed_s)
             return none
         q_vrw, q_n, q_b = self._q(vrw_m2ps3)
+        self._last_acc = self._acc
         self._acc = np.asarray(acc_ne_mps2, dtype=float)
-        verdict = self._test(t_s, z, inc, q_vrw, q_n, q_b)
+        if placed_s != self._placed_s:  # the service's own change: z moves by a known step
+            known = self._last_acc * (placed_s - self._placed_s)
+            f.x[0:2] += known
+            if self._last_z is not None:
+                self._last_z = self._last_z + known
+            self._placed_s = placed_s
+        verdict = self._test(f, t_s, z, inc, q_vrw, q_n, q_b)
         if not hold and verdict.tested and verdict.stat < LEARN_BELOW * verdict.threshold:
             self._calibrate(verdict)
-        self._predict(t_s, inc, q_vrw, q_n, q_b)
-        self._update(z, hold or verdict.failed)
+        self._predict(f, t_s, inc, q_vrw, q_n, q_b)
+        self._update(f, z, hold or verdict.failed)
         if (
             not hold
             and not self.frozen
             and not verdict.failed
-            and self._start_t is not None
-            and t_s - self._start_t >= self.config.settle_s
+            and t_s - f.start_t_s >= self.config.settle_s
             and t_s - self._last_anchor_t >= self.config.anchor_interval_s
             and t_s - self._upset_t >= self.config.calm_s
         ):
-            self._anchor(t_s, inc, payload)
+            self._anchor(f, t_s, inc, payload)
         self._prune(t_s)
         return verdict
 
-    def _predict(self, t_s: float, inc: Increments, q_vrw: float, q_n: float, q_b: float) -> None:
-        assert self.x is not None and self.p is not None and self._t is not None  # noqa: S101
-        dt = t_s - self._t
-        f = np.eye(7)
-        f[0:2, 2:4] = -dt * _I2
-        f[0:2, 4:7] = -(inc.w - self._w)
-        self.x = f @ self.x
-        q = np.zeros(7)
+    def _predict(
+        self, f: _Filter, t_s: float, inc: Increments, q_vrw: float, q_n: float, q_b: float
+    ) -> None:
+        dt = t_s - f.t_s
+        phi = np.eye(N_STATE)
+        phi[0:2, 2:4] = -dt * _I2
+        dw = inc.w - f.w
+        phi[0:2, 4:7] = -dw
+        f.x = phi @ f.x
+        q = np.zeros(N_STATE)
         q[0:2] = q_vrw * dt
         q[2:4] = q_n * dt
         q[4:7] = q_b * dt
-        self.p = f @ self.p @ f.T + np.diag(q)
-        self._t, self._w = t_s, inc.w
+        f.p = phi @ f.p @ phi.T + np.diag(q)
+        f.t_s, f.w = t_s, inc.w
 
-    def _drift(self, t_s: float, inc: Increments) -> FloatArray:
-        """What the filter's biases add to ``d`` from its last fix to ``t_s`` (2,)."""
-        assert self.x is not None and self._t is not None and self._w is not None  # noqa: S101
-        return -(t_s - self._t) * self.x[2:4] - (inc.w - self._w) @ self.x[4:7]
+    def _drift(self, f: _Filter, t_s: float, inc: Increments) -> FloatArray:
+        """What the filter expects ``z`` to change by from its last fix to ``t_s`` (2,): the
+        biases' drift."""
+        return -(t_s - f.t_s) * f.x[2:4] - (inc.w - f.w) @ f.x[4:7]
 
-    def _update(self, z: FloatArray, hold: bool) -> None:
+    def _update(self, f: _Filter, z: FloatArray, hold: bool) -> None:
         """Fuse ``z``; the receiver's white velocity noise measured from consecutive ones
         (their difference less what the filter predicts between them) unless ``hold``."""
-        assert self.x is not None and self.p is not None  # noqa: S101
         cfg = self.config
         if not hold and self._last_z is not None:
             e2 = float(np.mean((z - self._last_z) ** 2)) * 0.5
@@ -271,21 +319,26 @@ class DragTest:
             self._r_white += w * (max(e2, cfg.gnss_vel_floor_mps**2) - self._r_white)
         self._last_z = z
         r = self._r_white
-        s = self.p[0:2, 0:2] + r * _I2
-        k = np.linalg.solve(s, self.p[0:2, :]).T  # (7, 2)
-        y = z - self.x[0:2]
+        h = np.zeros((2, N_STATE))
+        h[:, 0:2] = _I2
+        h[:, U] = -self.lag_sigma_s * self._acc  # a misplaced fix: its acceleration times it
+        ph = f.p @ h.T
+        s = h @ ph + r * _I2
+        k = np.linalg.solve(s, ph.T).T  # (8, 2)
+        k[U] = 0.0
+        y = z - h @ f.x
         if float(y @ np.linalg.solve(s, y)) > CALM_NIS:
-            self._upset_t = self._t  # the filter is being pulled: no reference for a while
-        self.x = self.x + k @ y
-        ikh = np.eye(7)
-        ikh[:, 0:2] -= k
-        self.p = ikh @ self.p @ ikh.T + r * (k @ k.T)
+            self._upset_t = f.t_s  # the filter is being pulled: no reference for a while
+        f.x = f.x + k @ y
+        ikh = np.eye(N_STATE) - k @ h
+        f.p = ikh @ f.p @ ikh.T + r * (k @ k.T)
 
     # ------------------------------------------------------------------ references
 
-    def _anchor(self, t_s: float, inc: Increments, payload: object) -> None:
-        assert self.x is not None and self.p is not None  # noqa: S101
-        self.refs.append(Anchor(t_s, self.x.copy(), self.p.copy(), inc, self._acc.copy(), payload))
+    def _anchor(self, f: _Filter, t_s: float, inc: Increments, payload: object) -> None:
+        self.refs.append(
+            Anchor(t_s, f.x.copy(), f.p.copy(), inc, self._acc.copy(), payload, self._placed_s)
+        )
         self._last_anchor_t = t_s
 
     def _prune(self, t_s: float) -> None:
@@ -307,18 +360,19 @@ class DragTest:
         pa = np.array([r.p for r in refs])
         dw = inc.w[None, :, :] - np.array([r.w for r in refs])
         n = len(refs)
-        j = np.zeros((n, 2, 7))
+        j = np.zeros((n, 2, N_STATE))
         j[:, 0, 0] = j[:, 1, 1] = 1.0
         j[:, 0, 2] = j[:, 1, 3] = -tau
         j[:, :, 4:7] = -dw
+        j[:, :, U] = -self.lag_sigma_s * self._acc
         sep = z[None, :] - np.einsum("nij,nj->ni", j, xa)
+        if any(r.placed_s != self._placed_s for r in refs):  # the service's own changes
+            acc_a = np.array([r.acc for r in refs])
+            sep -= acc_a * (self._placed_s - np.array([r.placed_s for r in refs]))[:, None]
         slow = 2.0 * cfg.gnss_vel_slow_mps**2 * (1.0 - np.exp(-tau / cfg.gnss_vel_slow_tau_s))
-        dacc = self._acc[None, :] - np.array([r.acc for r in refs])
         dturn = inc.turn - np.array([r.inc.turn for r in refs])
-        lag = self.lag_sigma_s**2 * np.sum(dacc * dacc, axis=1) + (
-            cfg.attitude_time_sigma_s * dturn
-        ) ** 2
-        extra = q_vrw * tau + (q_n + q_b) * tau**3 / 3.0 + self._r_white + slow + lag
+        att_time = (cfg.attitude_time_sigma_s * dturn) ** 2
+        extra = q_vrw * tau + (q_n + q_b) * tau**3 / 3.0 + self._r_white + slow + att_time
         cov = j @ pa @ j.transpose(0, 2, 1) + extra[:, None, None] * _I2
         a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
         det = a * d - b * b
@@ -327,7 +381,14 @@ class DragTest:
         return tau, sep, cov, stat
 
     def _test(
-        self, t_s: float, z: FloatArray, inc: Increments, q_vrw: float, q_n: float, q_b: float
+        self,
+        f: _Filter,
+        t_s: float,
+        z: FloatArray,
+        inc: Increments,
+        q_vrw: float,
+        q_n: float,
+        q_b: float,
     ) -> DragVerdict:
         live = [r for r in self.refs if r.t_s < t_s]
         if not live:
@@ -346,7 +407,7 @@ class DragTest:
         # interval
         step = False
         if self._last_z is not None:
-            jump = z - self._last_z - self._drift(t_s, inc)
+            jump = z - self._last_z - self._drift(f, t_s, inc)
             step = float(np.hypot(*jump)) >= STEP_FRACTION * float(np.hypot(*sep[k]))
         return DragVerdict(
             t_s,
@@ -456,7 +517,7 @@ class DragTest:
         ref = self.refs[-1]
         q_vrw, q_n, q_b = self._q(vrw_m2ps3)
         cfg = self.config
-        j = np.zeros((2, 7))
+        j = np.zeros((2, N_STATE))
         j[0, 0] = j[1, 1] = 1.0
         j[0, 2] = j[1, 3] = -tau_s
         cov = j @ ref.p @ j.T

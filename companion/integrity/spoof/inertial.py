@@ -145,7 +145,7 @@ class InertialIncrements:
             c[3] * gx + c[4] * gy + c[5] * gz,
             c[6] * gx + c[7] * gy + c[8] * gz + self._g,
         )
-        crow = c[:6]
+        crow = (c[0], c[1], c[2], c[3], c[4], c[5])
         # |omega x f|: how fast the specific force turns, per second of attitude time error
         turn = math.sqrt(
             (wy * fz - wz * fy) ** 2 + (wz * fx - wx * fz) ** 2 + (wx * fy - wy * fx) ** 2

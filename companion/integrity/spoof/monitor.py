@@ -93,8 +93,8 @@ class SpoofMonitor:
         self._receivers: dict[int, _Receiver] = {}
         self.episodes: dict[int, Episode] = {}
         self.lag_sigma_s: float | None = None
-        """Receiver 0's measured time-placement uncertainty, s (None: ``lag_sigma_s`` of
-        the configuration, the prior)."""
+        """What is not known of receiver 0's fix placement, s, as the service measured its
+        lag (None before: ``lag_sigma_s`` of the configuration, the prior)."""
 
     def reset(self) -> None:
         """Forget the IMU, the tests and the episodes (autopilot reboot, restart)."""
@@ -126,12 +126,11 @@ class SpoofMonitor:
         its separation over the 99 % factor of a 2-D normal (3.03), so that the published
         99 % bound reaches the receiver's position too. The IMU is trusted over a receiver
         it contradicts, but an IMU can fail as well and nothing here can tell a failed IMU
-        from a spoofed receiver: the accuracy says how far apart the two are."""
-        floor = 0.0
-        for ep in self.episodes.values():
-            if not ep.unverified:
-                floor = max(floor, ep.last_sep_m / K99_2D)
-        return floor
+        from a spoofed receiver: the accuracy says how far apart the two are. After a
+        re-admission the IMU could not verify, the floor is the protection level's (the
+        largest separation, or what the reference could not rule out): the receiver may
+        still be that far off, and nothing has shown otherwise."""
+        return self.hpl_floor_m() / K99_2D
 
     def hpl_floor_m(self) -> float:
         """The horizontal protection level's floor, m: the separation of a held-out
@@ -159,7 +158,8 @@ class SpoofMonitor:
                 return state
             ref = ep.reference.at(inc, self.inertial.vrw_psd_m2ps3())
             if ref is not None and (
-                best is None or _sigma_max_m(ref.pos_cov_ned_m2[:2, :2])
+                best is None
+                or _sigma_max_m(ref.pos_cov_ned_m2[:2, :2])
                 < _sigma_max_m(best.pos_cov_ned_m2[:2, :2])
             ):
                 best = ref
@@ -228,7 +228,7 @@ class SpoofMonitor:
             return SpoofStep()
         episode = self.episodes.get(rid)
         if not airborne and episode is None:
-            if rx.test.x is not None:
+            if rx.test.running:
                 rx.test.reset()
             rx.fails, rx.first_fail_t_s = 0, None
             return SpoofStep()
@@ -256,6 +256,7 @@ class SpoofMonitor:
             vrw,
             hold=held or suspected or rx.fails > 0,
             payload=payload,
+            placed_s=fix.placed_s,
         )
         rx.last = verdict
         self.stats["tested"] += int(verdict.tested)
@@ -318,7 +319,12 @@ class SpoofMonitor:
         if anchor is not None and isinstance(anchor.payload, tuple):
             nav_a, inc_a = anchor.payload
             ref = Reference(
-                nav_a, inc_a, anchor.x, anchor.p, rx.test.wander_m2ps5, rx.test.inflation
+                nav_a,
+                inc_a,
+                anchor.x,
+                anchor.p,
+                rx.test.wander_m2ps5,
+                rx.test.inflation,
             )
             self.episodes[rid] = Episode(rid, fix.t_s, ref)
             rx.test.frozen = True

@@ -694,10 +694,8 @@ class BlendNavigator:
         blend took from a receiver found lying is undone. Their covariance becomes
         ``state``'s, uncorrelated with the rest. False (nothing done) before a state
         exists or with a non-finite ``state``."""
-        if not self._init or not all(
-            np.all(np.isfinite(a))
-            for a in (state.pos_ned_m, state.vel_ned_mps, state.pos_cov_ned_m2, state.vel_cov_ned_m2ps2)
-        ):
+        arrays = (state.pos_ned_m, state.vel_ned_mps, state.pos_cov_ned_m2, state.vel_cov_ned_m2ps2)
+        if not self._init or not all(np.all(np.isfinite(a)) for a in arrays):
             return False
         if self._mech.seg_dt_s > 0.0:
             self._close_segment()
