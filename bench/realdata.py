@@ -85,6 +85,7 @@ def run_flight(folder: Path, out_dir: Path) -> dict[str, Any]:
         "replay_s": t1 - t0,
         "evaluate_s": t2 - t1,
         "log_s": summary.log_duration_s,
+        "spoof_alerts": summary.alerts.get("SPOOF", 0),
     }
 
 
@@ -183,9 +184,16 @@ def main(argv: list[str] | None = None) -> int:
         if "skipped" in run:
             rows.append({"flight": run["flight"], "wrong>25m": f"skipped: {run['skipped']}"})
             continue
-        row = {"flight": run["flight"], **run["result"].row(), **events_cells(run["events"])}
+        row = {
+            "flight": run["flight"],
+            **run["result"].row(),
+            **events_cells(run["events"]),
+            # no real flight was spoofed: a SPOOF on one is a false alarm
+            "SPOOF": f"{run['spoof_alerts']} {'PASS' if run['spoof_alerts'] == 0 else 'FAIL'}",
+        }
         texts_ok = run["events"].per_minute <= TEXTS_PER_MINUTE_MAX
-        row["all"] = "PASS" if run["result"].passed and texts_ok else "FAIL"
+        spoof_ok = run["spoof_alerts"] == 0
+        row["all"] = "PASS" if run["result"].passed and texts_ok and spoof_ok else "FAIL"
         rows.append(row)
     # other data sets' rows (dicts of column -> cell) are appended here
     # the walk beside the real flights folder (not with another --flights folder)

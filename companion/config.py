@@ -35,6 +35,7 @@ else:  # Python 3.10 (JetPack 6): the same parser, from PyPI
 from companion.engine.config import EngineConfig
 from companion.integrity.coast import CoastConfig
 from companion.integrity.monitor import IntegrityConfig
+from companion.integrity.spoof import SpoofConfig
 from companion.mavlink.decode import DecoderConfig
 from companion.mavlink.encode import EncoderConfig
 from companion.mavlink.link import LinkError, parse_url
@@ -151,6 +152,9 @@ class Config:
     """MAVLink 2 message signing per link ([signing.autopilot], [signing.gcs])."""
     raw: RawConfig = field(default_factory=RawConfig)
     """The raw receiver: carrier-phase positions checked by FIS-RAIM (docs/raw.md)."""
+    spoof: SpoofConfig = field(default_factory=lambda: SpoofConfig.for_grade("mems"))
+    """Receivers moving unlike the IMU (a spoofer that tracks the vehicle): the IMU
+    grade's figures; the preset ``--grade tactical`` has the tactical grade's."""
 
 
 def load_config(path: Path | None, base: Config | None = None) -> Config:

@@ -172,6 +172,7 @@ class Pipeline:
             cfg.coast,
             cfg.baro,
             cfg.imu_innovations,
+            cfg.spoof,
         )
         self.encoder = Encoder(self.config.encoder)
         self.stats = PipelineStats()
@@ -277,6 +278,7 @@ class Pipeline:
                 measured = lags.on_fix(sample)  # type: ignore[arg-type]
                 if measured is not None:
                     frames += self._on_measured_lag(measured, sample.t_s)
+                self.engine.gnss_lag_sigma_s = self._lag_sigma_s()
             if kind is HeadingCommand:
                 command = self.decoder.take_command()  # left with every HeadingCommand
                 if command is not None:
@@ -398,6 +400,15 @@ class Pipeline:
             ):
                 return self._request_streams()
         return []
+
+    def _lag_sigma_s(self) -> float | None:
+        """What is not known of receiver 0's fix placement, s: the measured lag's difference
+        from the one in use, or its sigma if larger (None before two windows measured it:
+        the spoofing monitor then takes its prior)."""
+        m = self.lag.measured() if self.lag is not None else None
+        if m is None or m.windows < 2:
+            return None
+        return max(abs(m.lag_s - self.lags.delay_s[0]), m.sigma_s)
 
     def _on_measured_lag(self, m: MeasuredLag, t_s: float) -> list[bytes]:
         """Receiver 0's lag measured: the fixes carried to it (:meth:`LagControl.switch`)

@@ -22,6 +22,7 @@ from typing import Any
 
 from companion.config import Config, ConfigError, template
 from companion.integrity.coast import CoastConfig
+from companion.integrity.spoof import SpoofConfig
 from companion.nav.blend import BlendConfig
 
 GRADES: tuple[str, ...] = ("mems", "tactical")
@@ -48,7 +49,10 @@ def grade_config(grade: str) -> Config:
     if grade not in GRADES:
         raise ConfigError(f"unknown IMU grade {grade!r} (known: {', '.join(GRADES)})")
     config = dataclasses.replace(
-        Config(), blend=BlendConfig.for_grade(grade), coast=CoastConfig.for_grade(grade)
+        Config(),
+        blend=BlendConfig.for_grade(grade),
+        coast=CoastConfig.for_grade(grade),
+        spoof=SpoofConfig.for_grade(grade),
     )
     blocks = {
         block: dataclasses.replace(getattr(config, block), **keys)

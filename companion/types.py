@@ -246,7 +246,9 @@ class GnssFix:
     velocity: ``vel_ne_mps`` (shape (2,)) is derived from them and is ``None``
     when the course is unknown. Accuracies are 1-sigma and ``None`` when the
     receiver did not report them (MAVLink's 0 / UINT16_MAX "unknown").
-    ``t_s`` is the time of validity of the fix on the autopilot clock.
+    ``t_s`` is the time of validity of the fix on the autopilot clock: its stamp less
+    ``placed_s``, the lag the service placed it with (changed only by the service: a lag
+    measured and carried in, a parameter read).
     """
 
     t_s: float
@@ -267,6 +269,7 @@ class GnssFix:
     vdop: float | None
     satellites: int | None
     dgps_age_s: float | None = None
+    placed_s: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)

@@ -64,6 +64,7 @@ from companion.engine.tilt_aiding import TiltAiding
 from companion.integrity.coast import CoastConfig, InertialCoast
 from companion.integrity.monitor import IntegrityConfig, IntegrityMonitor
 from companion.integrity.signal import SignalMonitor
+from companion.integrity.spoof import SpoofConfig
 from companion.nav.baro import BaroConfig, BaroHeight, BaroReference
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.earth import gravity_ned_mps2
@@ -199,8 +200,10 @@ class Engine:
         coast: CoastConfig | None = None,
         baro: BaroConfig | None = None,
         imu_innovations: ImuInnovationConfig | None = None,
+        spoof: SpoofConfig | None = None,
     ) -> None:
         self.config = config or EngineConfig()
+        self._spoof_config = spoof or SpoofConfig()
         self._outage_config = outage or OutageConfig()
         self._heading_config = heading or HeadingConfig()
         self._blend_config = blend or BlendConfig.for_grade("mems")
@@ -255,7 +258,7 @@ class Engine:
     def _reset(self) -> None:
         """Everything of one autopilot boot, from scratch (at start and after a reboot)."""
         cfg = self.config
-        self.integrity = IntegrityMonitor(self._integrity_config)
+        self.integrity = IntegrityMonitor(self._integrity_config, self._spoof_config)
         self.bridge_evidence = BridgeEvidence(inertial_accel_sigma_mps2(self._blend_config))
         """Probes of the inertial bridge against constant velocity (:mod:`.bridge_choice`)."""
         self._restart_navigation()
@@ -512,8 +515,10 @@ class Engine:
     # ------------------------------------------------------------------ handlers
 
     def _on_imu(self, sample: ImuSample) -> list[Output]:
-        if self.navigators.on_imu(sample) and self.coast is not None:
-            self.coast.on_imu(sample)
+        if self.navigators.on_imu(sample):
+            self.integrity.spoof.on_imu(sample)
+            if self.coast is not None:
+                self.coast.on_imu(sample)
         check = self.imu_check
         if check is None:
             return []
@@ -611,8 +616,10 @@ class Engine:
         self._attitude = sample
         self.heading.on_attitude(sample)  # the heading buffer, and the pitch: on ground?
         correction_rad = self.heading.correction_rad
-        if self.navigators.on_attitude(sample, correction_rad) and self.coast is not None:
-            self.coast.on_attitude(sample, correction_rad)
+        if self.navigators.on_attitude(sample, correction_rad):
+            self.integrity.spoof.on_attitude(sample, correction_rad)
+            if self.coast is not None:
+                self.coast.on_attitude(sample, correction_rad)
         return []
 
     def _on_autopilot_solution(self, sample: AutopilotSolution) -> list[Output]:
@@ -709,12 +716,10 @@ class Engine:
         ``sigma_rad`` (1-sigma)."""
         attitude = self._attitude
         correction_rad = self.heading.correction_rad
-        if (
-            attitude is not None
-            and self.navigators.on_attitude(attitude, correction_rad)
-            and self.coast is not None
-        ):
-            self.coast.on_attitude(attitude, correction_rad)
+        if attitude is not None and self.navigators.on_attitude(attitude, correction_rad):
+            self.integrity.spoof.on_attitude(attitude, correction_rad)
+            if self.coast is not None:
+                self.coast.on_attitude(attitude, correction_rad)
         self.navigators.reset_heading(sigma_rad)
 
     def _on_reboot(self, sample: RebootEvent) -> list[Output]:
@@ -744,7 +749,7 @@ class Engine:
         # another receiver's separation (or a reference) showed it wrong: no reset to it
         verdict = self.outage.assess(
             fix,
-            shown_wrong=self.integrity.fde.shown_wrong(rid),
+            shown_wrong=self.integrity.shown_wrong(rid),
             now_s=self.now_s,
             within_bound=self._within_bound,
         )
@@ -758,6 +763,7 @@ class Engine:
         if self.frame is None:  # _anchor sets it; keeps mypy honest
             raise ValueError("no local frame after anchoring")
         meas = gnss_measurement(fix, self.frame)
+        outputs += self._spoof_check(fix, meas)
         # the references are for flight: on the ground, before the taxi correction, the
         # autopilot's heading can be degrees off and taxi turns turn that into metres
         refs: Mapping[str, NavState] | None = (
@@ -782,7 +788,7 @@ class Engine:
             return outputs + self._reset_to(fix, meas)
         if self.integrity.exclude(rid):
             self.stats.gnss["excluded"] += 1
-            if self.integrity.fde.shown_wrong(rid):
+            if self.integrity.shown_wrong(rid):
                 self.outage.rejection_explained(rid)  # independent evidence: no reset clock
             else:
                 self.outage.rejected(fix)
@@ -823,7 +829,7 @@ class Engine:
                 self._rejected_beyond_bound.add(rid)
             # the receiver's own evidence vouches for the fix: the gate measured the
             # prediction's error; fused anyway (repeated, the outage monitor resets)
-            if self.outage.vouched(fix) and not self.integrity.fde.shown_wrong(rid):
+            if self.outage.vouched(fix) and not self.integrity.shown_wrong(rid):
                 update = navs.force(meas, update)
                 vouched = update.fused
                 if not vouched:  # its height failed: beyond what its own evidence covers
@@ -858,6 +864,46 @@ class Engine:
         if update.fused or update.reason == "gate":
             outputs += self.outage.gate_result(fix.t_s, update.fused)
         return outputs
+
+    @property
+    def gnss_lag_sigma_s(self) -> float | None:
+        """What is not known of receiver 0's fix placement against the IMU, s (None: not
+        measured): set by the pipeline from the lag it measures, for the spoofing
+        monitor's test (a misplaced fix moves by its acceleration times the error)."""
+        return self.integrity.spoof.lag_sigma_s
+
+    @gnss_lag_sigma_s.setter
+    def gnss_lag_sigma_s(self, sigma_s: float | None) -> None:
+        self.integrity.spoof.lag_sigma_s = sigma_s
+
+    def _spoof_check(self, fix: GnssFix, meas: GnssMeasurement) -> list[Output]:
+        """The fix against the IMU (:mod:`companion.integrity.spoof`); at a detection the
+        navigators restart from the reference that saw it, carried to now by the IMU."""
+        navigator = self.navigators.navigator
+        nav = navigator.predict(self.now_s) if navigator.initialised and self.now_s else None
+        rid = fix.receiver_id
+        step = self.integrity.spoof.on_fix(
+            fix,
+            meas,
+            nav,
+            airborne=not self._on_ground(),
+            suspected=self.integrity.fde.shown_wrong(rid),
+            own_verdict=self.signal.receiver_verdict(rid, fix.t_s),
+            evidence=self.signal.spoof_evidence(rid, fix.t_s),
+        )
+        state = step.rollback
+        if state is not None:
+            var_p = np.diag(state.pos_cov_ned_m2).copy()
+            var_v = np.diag(state.vel_cov_ned_m2ps2).copy()
+            meas_ref = GnssMeasurement(
+                state.t_s, state.pos_ned_m, var_p, state.vel_ned_mps, var_v,
+                FixType.FIX_3D, fix.receiver_id,
+            )  # fmt: skip
+            self.navigators.rebase(state, meas_ref)
+            self.bridge.restart()
+            self.vertical_prior.restart()
+            self.stats.gnss["spoof_rollback"] += 1
+        return list(step.alerts)
 
     def _within_bound(self, fix: GnssFix) -> bool:
         """Has the solution held the receiver of ``fix`` within its bound: every fix of it
@@ -1039,6 +1085,8 @@ class Engine:
         state = self.bridge.carry(state, t_s, mode, no_imu)
         if self.config.vertical_prior and not no_imu and mode in GAP_MODES:
             state = self._vertical_prior_carry(state)
+        if mode in OUTAGE_MODES and self.integrity.spoof.episodes:
+            state = self.integrity.spoof.bridge(state)  # the last state no spoofed fix touched
         return state
 
     def _vertical_prior_add(self, meas: GnssMeasurement) -> None:

@@ -29,7 +29,7 @@ from scipy.stats import chi2
 from companion.nav.blend import BlendConfig, BlendNavigator
 from companion.nav.frames import LocalFrame
 from companion.nav.motion import SingerConfig, SingerNavigator
-from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator
+from companion.nav.navigator import GnssMeasurement, GnssUpdate, Navigator, NavState
 from companion.nav.passthrough import PassthroughConfig, PassthroughNavigator
 from companion.types import AttitudeSample, ImuSample
 
@@ -265,6 +265,18 @@ class Navigators:
         if self.imu_rate.usable:
             self._restart_primary = False
         for nav in self.all():
+            nav.reset()
+            nav.on_gnss(meas, gate=False)
+
+    def rebase(self, state: NavState, meas: GnssMeasurement) -> None:
+        """Restart every navigator's position and velocity from ``state`` (``meas``: the
+        same as a measurement): the blend keeps its attitude and biases
+        (:meth:`BlendNavigator.rebase`), the others restart from ``meas``."""
+        self.backlog.clear()
+        self._backlog_overflowed = False
+        for nav in self.all():
+            if isinstance(nav, BlendNavigator) and nav.rebase(state):
+                continue
             nav.reset()
             nav.on_gnss(meas, gate=False)
 

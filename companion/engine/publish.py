@@ -109,6 +109,8 @@ class Publisher:
         outputs: list[Output] = list(integrity.on_solution(solution, landed))
         if not integrity.integrity_ok:
             solution = integrity_lost(solution, integrity.accuracy_floor_m())
+        elif integrity.spoof.episodes:
+            solution = widened(solution, integrity.accuracy_floor_m())
         outputs.insert(0, solution)
         status_tick = tick(t_s, self._status_rate_hz)
         in_outage = mode in OUTAGE_MODES
@@ -153,8 +155,17 @@ def integrity_lost(solution: NavSolution, floor_m: tuple[float, float]) -> NavSo
     """The solution as published while integrity is lost: no fix, accuracies at least
     the monitor's floor (the size of the unexplained disagreement; horizontal and
     vertical, m)."""
-    cov = solution.pos_cov_ned_m2.copy()
+    return replace(widened(solution, floor_m), fix_type=FixType.NO_FIX)
+
+
+def widened(solution: NavSolution, floor_m: tuple[float, float]) -> NavSolution:
+    """The solution with its position variances at least the floors' squares (horizontal
+    and vertical 1-sigma, m)."""
     h_floor, v_floor = floor_m
+    cov = solution.pos_cov_ned_m2
+    if cov[0, 0] >= h_floor**2 and cov[1, 1] >= h_floor**2 and cov[2, 2] >= v_floor**2:
+        return solution
+    cov = cov.copy()
     for axis, floor in ((0, h_floor), (1, h_floor), (2, v_floor)):
         cov[axis, axis] = max(cov[axis, axis], floor**2)
-    return replace(solution, fix_type=FixType.NO_FIX, pos_cov_ned_m2=cov)
+    return replace(solution, pos_cov_ned_m2=cov)

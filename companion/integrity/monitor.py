@@ -29,6 +29,7 @@ with an adaptive GPS/INS blend (requirement tables). RTCA DO-229 appendix J
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -40,10 +41,18 @@ from companion.integrity.fde.fix_tests import FixTests
 from companion.integrity.protection.alerts import AlertState
 from companion.integrity.protection.levels import ProtectionLevels
 from companion.integrity.protection.limits import AlertLimit, ApproachCategory, FlightPhase
+from companion.integrity.spoof import SpoofConfig, SpoofMonitor
 from companion.nav.baro import BaroReference
 from companion.nav.frames import LocalFrame
 from companion.nav.navigator import GnssMeasurement, GnssUpdate, NavState
-from companion.types import GnssFix, LandedState, NavSolution, Output
+from companion.types import (
+    GnssFix,
+    IntegrityReport,
+    InterferenceState,
+    LandedState,
+    NavSolution,
+    Output,
+)
 
 __all__ = ["FixCheck", "IntegrityConfig", "IntegrityMonitor"]
 
@@ -60,11 +69,16 @@ class IntegrityMonitor:
     solution covariance is not finite (then integrity is lost).
     """
 
-    def __init__(self, config: IntegrityConfig | None = None) -> None:
+    def __init__(
+        self, config: IntegrityConfig | None = None, spoof: SpoofConfig | None = None
+    ) -> None:
         self.config = config or IntegrityConfig()
         self.stats: Counter[str] = Counter()
         self.fde = FaultDetector(self.config, self.stats)
         """Fault detection and exclusion (per fix)."""
+        self.spoof = SpoofMonitor(spoof)
+        """Receivers moving unlike the IMU (a spoofer that tracks the vehicle), held out
+        until they agree with it again (:mod:`companion.integrity.spoof`)."""
         self.protection = AlertState(self.config, self.stats)
         """Protection levels, integrity and category of the published solution."""
         self.k_h = self.protection.k_h
@@ -79,6 +93,7 @@ class IntegrityMonitor:
         """Forget everything but ``stats`` (autopilot reboot)."""
         self.fde.reset()
         self.protection.reset()
+        self.spoof.reset()
         self._excused_until_s.clear()
 
     # ------------------------------------------------------------------ the service's own changes
@@ -122,13 +137,21 @@ class IntegrityMonitor:
     # ------------------------------------------------------------------ fault detection
 
     def exclude(self, receiver_id: int) -> bool:
-        """True when ``receiver_id`` is currently excluded (do not fuse its fixes)."""
-        return self.fde.exclude(receiver_id)
+        """True when ``receiver_id`` is currently excluded (do not fuse its fixes): by fault
+        detection, or held out as spoofed."""
+        return self.fde.exclude(receiver_id) or self.spoof.excluded(receiver_id)
+
+    def shown_wrong(self, receiver_id: int) -> bool:
+        """True while ``receiver_id`` is excluded on independent evidence (another
+        receiver, a reference, the IMU's drag test): the navigator must not be reset to it
+        on its own self-consistency."""
+        return self.fde.shown_wrong(receiver_id) or self.spoof.excluded(receiver_id)
 
     @property
     def fault_detected(self) -> bool:
-        """True while a fault is unresolved or any receiver is excluded."""
-        return self.fde.fault_detected
+        """True while a fault is unresolved, any receiver is excluded or one is held out
+        as spoofed."""
+        return self.fde.fault_detected or bool(self.spoof.episodes)
 
     @property
     def fault_unresolved(self) -> bool:
@@ -141,9 +164,11 @@ class IntegrityMonitor:
         return self.fde.last_check
 
     def accuracy_floor_m(self) -> tuple[float, float]:
-        """Horizontal and vertical 1-sigma the published accuracies must not undercut, m
-        (:meth:`FaultDetector.accuracy_floor_m`)."""
-        return self.fde.accuracy_floor_m()
+        """Horizontal and vertical 1-sigma the published accuracies must not undercut, m:
+        an unresolved fault's (:meth:`FaultDetector.accuracy_floor_m`) or a receiver held
+        out as spoofed (:meth:`SpoofMonitor.accuracy_floor_m`)."""
+        h_m, v_m = self.fde.accuracy_floor_m()
+        return max(h_m, self.spoof.accuracy_floor_m()), v_m
 
     def shift_frame(self, old: LocalFrame, new: LocalFrame) -> None:
         """Re-express stored fixes in the engine's new local frame (re-anchoring)."""
@@ -178,7 +203,13 @@ class IntegrityMonitor:
                     "; ".join(failures),
                 )
                 update, predicted = None, None
-        return self.fde.on_fix(fix, meas, update, predicted, references, baro)
+        outputs = self.fde.on_fix(fix, meas, update, predicted, references, baro)
+        if outputs and self.spoof.excluded(fix.receiver_id):
+            # the receiver is held out as spoofed, said once by SPOOF: its tests' failures
+            # meanwhile are that same event (counted, not alerted again)
+            self.stats["fault_alerts_while_spoofed"] += len(outputs)
+            return []
+        return outputs
 
     def baro_usable(self, baro: BaroReference) -> bool:
         """Is the barometer tested against now? ``baro_reference`` on, out of the taxi
@@ -237,4 +268,17 @@ class IntegrityMonitor:
             return []
         fde = self.fde
         fde.advance(t)
-        return self.protection.update(solution, landed, fde.fault_unresolved, fde.fault_detected)
+        outputs = self.protection.update(
+            solution,
+            landed,
+            fde.fault_unresolved,
+            self.fault_detected,
+            hpl_floor_m=self.spoof.hpl_floor_m(),
+        )
+        state = self.spoof.state()
+        if state is InterferenceState.UNKNOWN:
+            return outputs
+        return [
+            dataclasses.replace(out, spoofing=state) if isinstance(out, IntegrityReport) else out
+            for out in outputs
+        ]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from dataclasses import replace
 
 from companion.integrity.config import IntegrityConfig
 from companion.integrity.protection.levels import (
@@ -90,9 +91,11 @@ class AlertState:
         landed: LandedState | None,
         fault_unresolved: bool,
         fault_detected: bool,
+        hpl_floor_m: float = 0.0,
     ) -> list[Output]:
         """Phase, protection levels, alert limit and category for one published solution
-        (finite ``t_s``), given the fault detector's state at its time.
+        (finite ``t_s``), given the fault detector's state at its time. ``hpl_floor_m``:
+        the HPL is at least this (a held-out receiver contradicts the solution by it).
 
         Returns INTEGRITY / CAT alerts on changes, and at ``report_rate_hz`` the
         ``CMP_HPL``, ``CMP_VPL``, ``CMP_CAT`` values and an :class:`IntegrityReport`.
@@ -103,6 +106,8 @@ class AlertState:
             solution.alt_msl_m, solution.vel_ned_mps, landed, t
         )
         pl = protection_levels(solution.pos_cov_ned_m2, self.k_h, self.k_v)
+        if hpl_floor_m > pl.hpl_m:
+            pl = replace(pl, hpl_m=hpl_floor_m)
         self.levels = pl
         limit = alert_limit(self.phase, cfg.approach_category)
         self.limit = limit

@@ -123,7 +123,8 @@ class GnssDecoder:
         eph = msg.eph
         epv = msg.epv
         sats = msg.satellites_visible
-        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - self.delay_s[receiver]
+        placed_s = self.delay_s[receiver]
+        t_s = self._time_us(msg.time_usec, stream, t_rx_s, clock=False) - placed_s
         # positional, in GnssFix's field order (18 keywords cost more on this path)
         return GnssFix(
             t_s,
@@ -144,6 +145,7 @@ class GnssDecoder:
             None if epv == units.UINT16_UNKNOWN else epv / units.DOP_SCALE,  # vdop
             None if sats == units.UINT8_UNKNOWN else sats,  # satellites
             (msg.dgps_age / units.MS_PER_S) if receiver == 1 else None,  # dgps_age_s
+            placed_s,
         )
 
     def gps_raw(self, msg: Any, t_rx_s: float) -> GnssFix:

@@ -688,6 +688,34 @@ class BlendNavigator:
         self._last_fuse_t_s = math.nan
         self.generation += 1
 
+    def rebase(self, state: NavState) -> bool:
+        """Restart the position and velocity from ``state`` (an independent reference at
+        about the newest IMU time), keeping the attitude and the IMU's biases: what the
+        blend took from a receiver found lying is undone. Their covariance becomes
+        ``state``'s, uncorrelated with the rest. False (nothing done) before a state
+        exists or with a non-finite ``state``."""
+        arrays = (state.pos_ned_m, state.vel_ned_mps, state.pos_cov_ned_m2, state.vel_cov_ned_m2ps2)
+        if not self._init or not all(np.all(np.isfinite(a)) for a in arrays):
+            return False
+        if self._mech.seg_dt_s > 0.0:
+            self._close_segment()
+        mech = self._mech
+        dt = mech.t_s - state.t_s
+        mech.pos = [float(c) for c in state.pos_ned_m + state.vel_ned_mps * dt]
+        mech.vel = [float(c) for c in state.vel_ned_mps]
+        p = self._p
+        for k in (ins.IP, ins.IV):
+            p[k : k + 3, :] = 0.0
+            p[:, k : k + 3] = 0.0
+        p[ins.IP : ins.IP + 3, ins.IP : ins.IP + 3] = state.pos_cov_ned_m2 + dt * dt * (
+            state.vel_cov_ned_m2ps2
+        )
+        p[ins.IV : ins.IV + 3, ins.IV : ins.IV + 3] = state.vel_cov_ned_m2ps2
+        self._hist = deque([snapshot_of(mech, self._p)])
+        self._last_fuse_t_s = math.nan
+        self.generation += 1
+        return True
+
     # ------------------------------------------------------------------ diagnostics
 
     @property
