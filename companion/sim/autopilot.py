@@ -13,7 +13,14 @@ is expected to do):
 * ``imu_id``: RAW_IMU / HIGHRES_IMU their ``id`` field (0); SCALED_IMU2 is IMU 1.
 * GPS_RAW_INT ``time_usec``: ArduPilot stamps UNIX-epoch microseconds of the
   fix, PX4 time since boot; ``t_s`` is the fix's boot time either way (the
-  epoch offset is given by SYSTEM_TIME, sent at 1 Hz by both flavours).
+  epoch offset is given by SYSTEM_TIME, sent at 1 Hz by both flavours). ArduPilot's
+  stamp is the receiver's own time: a meaconed receiver's clock is late by the replay's
+  delay, and so is its ``t_s`` (the decoder also rejects the stamps that step back,
+  ``time_backwards``, which the samples here do not model).
+* GNSS_INTEGRITY (development dialect, ``Scenario.gnss_integrity_relay``): a
+  :class:`GnssSignalReport` with ``source = "autopilot"``, the states mapped from
+  GPS_JAMMING_STATE / GPS_SPOOFING_STATE (0 unknown, 1 clean, 2 mitigated, 3 detected)
+  and the latest boot-clock ``t_s`` (the message carries no time).
 * GPS_RAW_INT/GPS2_RAW: ``vel_ne_mps = vel/100 * (cos cog, sin cog)``,
   ``h_acc``, ``v_acc``, ``vel_acc`` in mm (0 = unknown -> None), eph/epv / 100
   (65535 -> None), ``dgps_age_s`` from GPS2_RAW's ``dgps_age`` (ms), None for
@@ -43,8 +50,10 @@ from companion.types import (
     FixType,
     FloatArray,
     GnssFix,
+    GnssSignalReport,
     HeartbeatSample,
     ImuSample,
+    InterferenceState,
     LandedState,
     LandedStateSample,
     RtkStatus,
@@ -262,6 +271,9 @@ class GnssReport:
     satellites: int
     keep_coords: bool = False
     """Write the coordinates even without a fix (a receiver's garbage during no-fix)."""
+    clock_offset_s: float = 0.0
+    """The receiver's clock minus the true time (meaconing: minus the delay), s: it shows
+    where the autopilot stamps the receiver's time (ArduPilot's ``time_usec``)."""
 
 
 def gnss_stream(
@@ -278,7 +290,8 @@ def gnss_stream(
     def make(i: int, t_rx: float, _last: float | None) -> tuple[Any, Sample | None, float | None]:
         r = reports[i]
         boot_us = round(r.t_fix_s * units.US_PER_S)
-        epoch_us = round(epoch0_s * units.US_PER_S) + boot_us
+        clock_us = round(r.clock_offset_s * units.US_PER_S)
+        epoch_us = round(epoch0_s * units.US_PER_S) + boot_us + clock_us
         time_usec = epoch_us if ardupilot else boot_us
         has_fix = r.fix_type >= FixType.FIX_2D
         coords = has_fix or r.keep_coords
@@ -311,7 +324,7 @@ def gnss_stream(
                 4 if age_ms else 0, age_ms, 0, alt_e, h_acc, v_acc, vel_acc, 0,
             )  # fmt: skip
             dgps_age = age_ms / units.MS_PER_S
-        t = boot_us / units.US_PER_S
+        t = (boot_us + clock_us if ardupilot else boot_us) / units.US_PER_S
         course = None if cog == units.UINT16_UNKNOWN else cog * _RAD_PER_CDEG
         gs_dec = 0.0 if vel == units.UINT16_UNKNOWN else vel / units.CM_PER_M
         vel_ne = (
@@ -353,8 +366,10 @@ def rtk_stream(
     nsats: list[int],
     fixed: list[bool],
     latency_s: float,
+    clock_offset_s: FloatArray | None = None,
 ) -> Stream:
-    """GPS_RTK / GPS2_RTK at the given fix times (only sent while in RTK)."""
+    """GPS_RTK / GPS2_RTK at the given fix times (only sent while in RTK); the week and
+    time of week are the receiver's (late by ``-clock_offset_s`` under meaconing)."""
     emit = t_fix_s + latency_s + 0.003
     name = "GPS_RTK" if receiver_id == 0 else "GPS2_RTK"
     cls = mav.MAVLink_gps_rtk_message if receiver_id == 0 else mav.MAVLink_gps2_rtk_message
@@ -362,6 +377,8 @@ def rtk_stream(
     def make(i: int, t_rx: float, last: float | None) -> tuple[Any, Sample | None, float | None]:
         ms = round(float(t_fix_s[i]) * units.MS_PER_S)
         gps_s = epoch0_s + float(t_fix_s[i]) - GPS_EPOCH_UNIX_S + GPS_LEAP_S
+        if clock_offset_s is not None:
+            gps_s += float(clock_offset_s[i])
         wn = int(gps_s // 604800)
         tow = round((gps_s - wn * 604800) * units.MS_PER_S)
         base = [_i(x * units.MM_PER_M, -(2**31), 2**31 - 1) for x in baseline_ned_m[i]]
@@ -376,6 +393,38 @@ def rtk_stream(
         return msg, smp, None
 
     return Stream(name, emit, make)
+
+
+_STATES = {
+    0: InterferenceState.UNKNOWN,
+    1: InterferenceState.CLEAN,
+    2: InterferenceState.MITIGATED,
+    3: InterferenceState.DETECTED,
+}
+"""GPS_JAMMING_STATE / GPS_SPOOFING_STATE -> InterferenceState."""
+
+
+def gnss_integrity_stream(emit_s: FloatArray, jamming: list[int], spoofing: list[int]) -> Stream:
+    """GNSS_INTEGRITY (id 441, MAVLink's development dialect) for receiver 0, as PX4's
+    mavlink module sends it from its first GNSS receiver: the receiver's jamming and
+    spoofing states, authentication and RAIM unknown (0; ``raim_hfom``/``raim_vfom``
+    65535), the quality figures not available (255), no system error.
+
+    PX4 fills ``id`` with the low byte of the receiver's device id; this stream sends the
+    receiver's instance (0), as the message's definition asks.
+    """
+    from pymavlink.dialects.v20 import development as dev
+
+    def make(i: int, t_rx: float, last: float | None) -> tuple[Any, Sample | None, float | None]:
+        msg = dev.MAVLink_gnss_integrity_message(
+            0, 0, 0, jamming[i], spoofing[i], 0, 65535, 65535, 255, 255, 255, 255
+        )
+        if last is None:
+            return msg, None, None
+        smp = GnssSignalReport(last, 0, "autopilot", _STATES[jamming[i]], _STATES[spoofing[i]])
+        return msg, smp, None
+
+    return Stream("GNSS_INTEGRITY", emit_s, make)
 
 
 # --------------------------------------------------------------------------- housekeeping

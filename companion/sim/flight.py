@@ -21,6 +21,13 @@ from companion.nav.frames import LocalFrame
 from companion.nav.grades import ATTITUDE_ERROR_BY_GRADE, IMU_GRADES
 from companion.sim import autopilot as ap
 from companion.sim import realism as rz
+from companion.sim.attacks import (
+    MAV_JAMMING,
+    MAV_SPOOFING,
+    ReceiverAttacks,
+    flags,
+    on_receiver,
+)
 from companion.sim.scenarios import Event, Scenario, build_script
 from companion.sim.sensors import (
     ATTITUDE_RATE_NOISE_RADPS,
@@ -128,7 +135,10 @@ class GnssTruthErrors:
     label: np.ndarray
     pos_err_ned_m: FloatArray
     fault_ned_m: FloatArray
+    """Step/ramp/dither offsets plus the attacks' (drag, meaconing) position offsets."""
     vel_err_ned_mps: FloatArray
+    attacks: ReceiverAttacks | None = None
+    """Drags, meaconing, jamming (:mod:`companion.sim.attacks`): None when none."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -319,6 +329,13 @@ def simulate(scenario: Scenario, seed: int) -> SimFlight:
         streams.extend(stream_list)
         gnss_truth.append(gt)
 
+    if sc.gnss_integrity_relay:  # 1 Hz, the receiver's own flags (companion.sim.attacks)
+        t_gi = _grid(t0, t1, 1.0, 1e3, offset_s=0.19)
+        jam, spoof = flags(sc, 0, t_gi - sc.gnss_latency_s)
+        streams.append(ap.gnss_integrity_stream(
+            t_gi, [MAV_JAMMING[bool(x)] for x in jam], [MAV_SPOOFING[bool(x)] for x in spoof]
+        ))  # fmt: skip
+
     # ---------------------------------------------------------------- housekeeping
     t_hb = _grid(t0, t1, 1.0, 1e3)  # the first message of the record
     armed = [p != "parked" for p in path.phase_at(t_hb)] if len(t_hb) else []
@@ -463,12 +480,17 @@ def _gnss_streams(
         vel_err[:] = 0.0
     fault = np.array([fault_offset_ned_m(sc, rid, float(t)) for t in t_fix]).reshape(-1, 3)
     sg = path.evaluate(t_fix)
+    atk = on_receiver(sc, rid, t_fix, path)  # None without attacks: nothing changes
+    if atk is not None:
+        fault = fault + atk.pos_off_ned_m
+        pos_err *= atk.acc_factor[:, None]
+        vel_err *= atk.acc_factor[:, None]
     pos_rep = sg.pos_ned_m + pos_err + fault
     gx = _gnss_realism(plan, t_fix, specs) if plan is not None else None
     if gx is not None:
         vel_err = vel_err + gx.vel_bias_ned_mps
         pos_rep = pos_rep + gx.garbage_ned_m
-    vel_rep = sg.vel_ned_mps + vel_err
+    vel_rep = sg.vel_ned_mps + vel_err + (0.0 if atk is None else atk.vel_off_ned_mps)
     lat, lon, alt = _lla(frame, pos_rep)
     reports: list[ap.GnssReport] = []
     rtk_i: list[int] = []
@@ -484,6 +506,8 @@ def _gnss_streams(
                 float(alt[k]) + sc.geoid_undulation_m, vel_rep[k, :2].copy(), sp.sigma_h_m,
                 sp.sigma_v_m, float(vsig[k]), sp.hdop, sp.vdop, sp.satellites,
             )  # fmt: skip
+            if atk is not None:
+                rep = atk.report(rep, k)
             if gx is not None:
                 rep = gx.report(rep, k)
             last = rep
@@ -500,10 +524,11 @@ def _gnss_streams(
                 np.array([specs[i].sigma_h_m for i in rtk_i]),
                 [specs[i].satellites for i in rtk_i],
                 [specs[i].fix_type == FixType.RTK_FIXED for i in rtk_i], latency,
+                None if atk is None else -atk.delay_s[ri],
             )
         )  # fmt: skip
     label = np.array([s.label for s in states])
-    return streams, GnssTruthErrors(rid, t_fix, label, pos_err, fault, vel_err)
+    return streams, GnssTruthErrors(rid, t_fix, label, pos_err, fault, vel_err, atk)
 
 
 # --------------------------------------------------------------------------- realism

@@ -18,6 +18,11 @@ Event kinds (``Event.kind``), all on the autopilot clock ``t_s``:
 ``ramp``         ``rate_ned_mps * (t - t_start)`` added (e.g. 4 cm/s)
 ``dither``       ``amplitude_m * sin(2 pi (t - t_start) / period_s) * axis_ned``
                  added (e.g. 1 m)
+``drag``         a spoofer drags position and velocity together (``accel_mps2`` up to
+                 ``max_speed_mps`` along ``direction_ned``), lets go at the end
+``meaconing``    the true signal replayed ``delay_s`` (+ ``delay_rate`` per s) late
+``jamming``      satellites drop and accuracies grow over ``degrade_s``, then no fix,
+                 then ``recover_s`` of recovery (:mod:`companion.sim.attacks`)
 
 The catalogue's one-line descriptions are written into each flight's JSON
 sidecar (and the committed fixtures'): they are output, their parenthesised
@@ -45,7 +50,8 @@ from typing import Any
 
 from companion.nav.frames import LocalFrame
 from companion.ranges import check_ranges, ranged
-from companion.sim.realism import Realism
+from companion.sim.attacks import ATTACK_KINDS, check_params
+from companion.sim.realism import Realism, realistic
 from companion.sim.trajectory import ScriptBuilder
 from companion.types import AutopilotFlavour
 
@@ -55,7 +61,9 @@ IMU_GRADES = ("tactical", "mems", "perfect")
 IMU_MESSAGES = ("HIGHRES_IMU", "RAW_IMU", "SCALED_IMU2")
 GNSS_MODES = ("rtk_fixed", "rtk_float", "dgps", "3d")
 DOWNGRADE_MODES = ("rtk_fixed", "rtk_float", "dgps", "3d", "none")
-EVENT_KINDS = ("outage", "rtk_outage", "downgrade", "stale", "step", "ramp", "dither")
+EVENT_KINDS = (
+    "outage", "rtk_outage", "downgrade", "stale", "step", "ramp", "dither", *ATTACK_KINDS,
+)  # fmt: skip
 
 _G0 = 9.80665
 
@@ -81,6 +89,8 @@ class Event:
             raise ValueError(f"event {self.kind}: receiver_id must be 0 or 1")
         if self.kind == "downgrade" and self.params.get("mode") not in DOWNGRADE_MODES:
             raise ValueError(f"downgrade event needs params mode in {DOWNGRADE_MODES}")
+        if self.kind in ATTACK_KINDS:
+            check_params(self.kind, self.t_end_s - self.t_start_s, self.params)
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
 
     def active(self, t_s: float) -> bool:
@@ -151,6 +161,10 @@ class Scenario:
     realism: Realism | None = None
     """The autopilot's imperfections (:mod:`companion.sim.realism`); None: none (left out
     of :meth:`as_dict`, so existing sidecars stay as they are)."""
+    gnss_integrity_relay: bool = False
+    """The autopilot relays receiver 0's own jamming/spoofing state in GNSS_INTEGRITY (as
+    PX4 does; MAVLink's development dialect, which ardupilotmega readers do not know):
+    off by default, and then left out of :meth:`as_dict`."""
 
     def __post_init__(self) -> None:
         def bad(msg: str) -> ValueError:
@@ -172,6 +186,8 @@ class Scenario:
                 raise bad(f"taxi leg ({length}, {turn}) needs length > 0 and |turn| <= 180")
         if self.realism is not None and not isinstance(self.realism, Realism):
             raise bad("realism must be a Realism or None")
+        if not isinstance(self.gnss_integrity_relay, bool):
+            raise bad("gnss_integrity_relay must be true or false")
         for ev in self.events:
             if not isinstance(ev, Event):
                 raise bad("events must be Event instances")
@@ -192,6 +208,8 @@ class Scenario:
                 if v is None:
                     continue
                 v = v.as_dict()
+            elif f.name == "gnss_integrity_relay" and not v:
+                continue
             elif f.name == "events":
                 v = [e.as_dict() for e in v]
             elif isinstance(v, AutopilotFlavour):
@@ -523,8 +541,6 @@ def _realistic_variant(
 ) -> tuple[dict[str, Any], EventFactory, str]:
     """A catalogued flight as a realistic autopilot of ``vehicle`` delivers it (its GNSS
     mode kept: the realism is the autopilot's, the receiver's mode is the scenario's)."""
-    from companion.sim.realism import realistic
-
     base, factory, desc = _CATALOGUE[name]
     over = {k: v for k, v in realistic(vehicle).items() if k != "gnss_mode"}
     return {**base, **over, **extra}, factory, f"{desc}; as a realistic {label} delivers it"
@@ -547,6 +563,48 @@ _REALISTIC_VARIANTS: dict[str, tuple[Any, ...]] = {
 """Realistic variants of the bundled flights (companion.sim.realism's profiles)."""
 for _name, (_base, _vehicle, _label, *_extra) in _REALISTIC_VARIANTS.items():
     _CATALOGUE[_name] = _realistic_variant(_base, _vehicle, _label, *(_extra or [{}]))
+
+BARO_REALISM = {"baro_rate_hz": 10.0, "baro_noise_hpa": 0.025, "baro_drift_hpa_per_h": 1.0,
+                "baro_ground_effect_hpa": 0.1}  # fmt: skip
+"""A barometer as the realistic simulator makes one: the radio copter's noise, drift and
+ground effect (measured on its logs, docs/simulator.md) at 10 Hz."""
+
+
+def spoofing_cruise() -> dict[str, Any]:
+    """The flight the spoofing scenarios attack: level cruise at 300 m with turns, as a
+    realistic ArduPlane with a barometer delivers it, one standalone receiver (3D fix)."""
+    plane = realistic("plane")
+    rl = dataclasses.replace(plane["realism"], **BARO_REALISM)
+    return {**plane, "flight": "cruise", "cruise_s": 300.0, "realism": rl}
+
+
+def _in_cruise(kind: str, length_s: float, params: dict[str, Any]) -> EventFactory:
+    def make(b: ScriptBuilder) -> tuple[Event, ...]:
+        c0, _ = phase_window(b, "cruise")
+        return (Event(kind, c0 + 120.0, c0 + 120.0 + length_s, params=params),)
+
+    return make
+
+
+_ATTACKED = "cruise with turns as a realistic ArduPlane with a barometer delivers it, 3D fix"
+_CATALOGUE["cruise_spoof_drag"] = (
+    spoofing_cruise(),
+    _in_cruise("drag", 120.0, {"accel_mps2": 0.5, "direction_ned": (0.5, 0.866, 0.0)}),
+    f"{_ATTACKED}; 120 s in, a spoofer drags receiver 0 at 0.5 m/s^2 up to 5 m/s toward "
+    "060 deg for 120 s, then lets go (Tanil et al. 2018)",
+)
+_CATALOGUE["cruise_meaconing"] = (
+    spoofing_cruise(),
+    _in_cruise("meaconing", 120.0, {"delay_s": 1.0, "delay_rate": 0.02}),
+    f"{_ATTACKED}; 120 s in, receiver 0 hears the true signal replayed 1 s late, the delay "
+    "growing 0.02 s per s, for 120 s",
+)
+_CATALOGUE["cruise_jamming"] = (
+    spoofing_cruise(),
+    _in_cruise("jamming", 50.0, {"degrade_s": 20.0, "recover_s": 10.0}),
+    f"{_ATTACKED}; 120 s in, receiver 0 is jammed: 20 s of satellites dropping and "
+    "accuracies growing 8 times, 30 s without a fix, 10 s of recovery",
+)
 
 SCENARIO_NAMES: tuple[str, ...] = tuple(_CATALOGUE)
 """The named scenarios :func:`make_scenario` knows."""

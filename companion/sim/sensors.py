@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from companion.nav.grades import ImuGrade
+from companion.sim.attacks import jamming_lost
 from companion.sim.scenarios import Event, Scenario
 from companion.types import FixType, FloatArray
 
@@ -187,6 +188,8 @@ def gnss_state(sc: Scenario, receiver_id: int, t_s: float) -> GnssState:
             continue
         if ev.kind == "rtk_outage" and mode.startswith("rtk"):
             mode = _rtk_outage_mode(ev, mode, t_s)
+        elif ev.kind == "jamming" and jamming_lost(ev, t_s):
+            mode = "none"
         elif ev.active(t_s):
             if ev.kind == "downgrade":
                 mode = str(ev.params["mode"])
@@ -217,6 +220,8 @@ def _rtk_outage_mode(ev: Event, mode: str, t_s: float) -> str:
 
 def fault_offset_ned_m(sc: Scenario, receiver_id: int, t_s: float) -> FloatArray:
     """Sum of the step/ramp/dither offsets active on a receiver at ``t_s``, m, shape (3,).
+
+    The attacks' offsets (drags, meaconing) are :func:`companion.sim.attacks.on_receiver`'s.
 
     References
     ----------
