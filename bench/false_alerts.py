@@ -781,7 +781,7 @@ def main() -> int:
     baseline = json.loads(BASELINE.read_text()) if BASELINE.is_file() else {}
     ok = print_detection(dets, baseline)
     if args.write_baseline:
-        data: dict[str, dict[str, Any]] = {}
+        data: dict[str, Any] = {"_code": code_version()}
         for d in dets:
             data.setdefault(d.section, {})[d.label] = {"runs": d.runs, "delays": d.delays}
         BASELINE.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
