@@ -117,3 +117,25 @@ def test_a_bias_seen_in_rtk_stands_through_positions_too_coarse_to_see_it() -> N
     assert seen["rtk"][-1] > 50.0 * 0.08**2
     assert min(seen["3d"]) > 10.0 * 0.08**2, min(seen["3d"])
     assert seen["after"][-1] == 0.0
+
+
+def test_a_velocity_seen_at_rest_is_its_error_until_the_positions_judge() -> None:
+    """Seeded at rest with the receiver's own velocity (0.12 m/s north at a standstill):
+    that is its error from the first fix on; RTK baselines that show a velocity as good
+    as reported then clear it."""
+    meter = VelocityErrorMeter(0.1)
+    assert meter.seed_at_rest(0, (0.12, -0.01), (4e-4, 4e-4))[1] == 0.0  # within its report
+    assert meter.excess_var_ne_m2ps2[0] >= 0.12**2
+    rng = np.random.default_rng(6)
+    excess = meter.excess_var_ne_m2ps2
+    for k in range(15 * 5):
+        t = k * 0.2
+        pos = rng.normal(0.0, 0.005, 2)
+        vel = rng.normal(0.0, 0.02, 2)
+        excess = meter.on_fix(
+            0, t, (pos[0], pos[1]), (vel[0], vel[1]), (2.25e-4, 2.25e-4), (4e-4, 4e-4), 30.0,
+            FixType.RTK_FIXED,
+        )  # fmt: skip
+        if t < 2.0:
+            assert excess[0] >= 0.12**2
+    assert excess == (0.0, 0.0)

@@ -90,6 +90,33 @@ class VelocityErrorMeter:
         self._last_pos_var = (0.0, 0.0)
         self.restart_chain()
 
+    def seed_at_rest(
+        self,
+        receiver_id: int,
+        vel_ne_mps: tuple[float, float],
+        vel_var_ne_m2ps2: tuple[float, float],
+    ) -> tuple[float, float]:
+        """The vehicle stands still (:func:`~companion.nav.blend.rest.at_rest`): the
+        receiver's horizontal velocity is its error. Beyond its reported variance by the
+        test's own bound (one sample, false-alarm probability :data:`FALSE_ALARM_PROB`),
+        it is held as the persistent error last measured, until baselines that could
+        see it show otherwise (:meth:`_excess`). Returns the excess variance to add,
+        north and east (m^2/s^2)."""
+        if receiver_id != self.receiver_id:
+            self.receiver_id = receiver_id
+            self._samples.clear()
+            self.restart_chain()
+        bound = self._bounds[1]
+        self._held = [
+            v * v if v * v > bound * r else 0.0
+            for v, r in zip(vel_ne_mps, vel_var_ne_m2ps2, strict=True)
+        ]
+        self.excess_var_ne_m2ps2 = (
+            self._held[0] * self._held_corr,
+            self._held[1] * self._held_corr,
+        )
+        return self.excess_var_ne_m2ps2
+
     def restart_chain(self) -> None:
         """Forget the open baseline (a new frame, a restart): the measured excess stays."""
         self._start: tuple[float, float, float] | None = None
