@@ -311,29 +311,36 @@ def _inside(t: float, wins: list[tuple[float, float]], early: float, late: float
 _LIMIT_RE = re.compile(r"([HV])PL ([0-9.]+) m > [HV]AL ([0-9.]+) m")
 
 
-def _receiver_over_limit(text: str, t_s: float, w: Windows) -> bool:
-    """Does the receiver's own latest fix (its reported h_acc, v_acc as the covariance)
-    give a protection level over every limit the INTEGRITY loss names (and is that all
-    it names)? Then the receiver cannot support the required category: the loss is real."""
+def receiver_pl(t_s: float, w: Windows) -> tuple[float, float] | None:
+    """The receiver's own protection levels (HPL, VPL, m) at its latest delivered fix at or
+    before ``t_s``: its reported h_acc and v_acc as the covariance, the monitor's K
+    factors (None before its first fix)."""
     from companion.integrity.config import IntegrityConfig
     from companion.integrity.protection.levels import k_horizontal, k_vertical
 
-    problems = text.split(": ", 1)[1].split("; ") if ": " in text else []
-    if not problems:
-        return False
     i = int(np.searchsorted(w.fix_t_s, t_s, side="right")) - 1
     if i < 0:
-        return False
+        return None
     cfg = IntegrityConfig()
+    return (
+        k_horizontal(cfg.integrity_risk_horizontal) * float(w.fix_h_acc_m[i]),
+        k_vertical(cfg.integrity_risk_vertical) * float(w.fix_v_acc_m[i]),
+    )
+
+
+def _receiver_over_limit(text: str, t_s: float, w: Windows) -> bool:
+    """Does the receiver's own protection level (:func:`receiver_pl`) exceed every limit
+    the INTEGRITY loss names (and is that all it names)? Then the receiver cannot support
+    the required category: the loss is real."""
+    problems = text.split(": ", 1)[1].split("; ") if ": " in text else []
+    own = receiver_pl(t_s, w)
+    if not problems or own is None:
+        return False
     for problem in problems:
         m = _LIMIT_RE.fullmatch(problem.strip())
         if m is None:  # navigation lost or initialising, an unresolved fault: not the receiver's
             return False
-        if m.group(1) == "H":
-            own = k_horizontal(cfg.integrity_risk_horizontal) * float(w.fix_h_acc_m[i])
-        else:
-            own = k_vertical(cfg.integrity_risk_vertical) * float(w.fix_v_acc_m[i])
-        if not own > float(m.group(3)):
+        if not (own[0] if m.group(1) == "H" else own[1]) > float(m.group(3)):
             return False
     return True
 
@@ -421,7 +428,11 @@ def run_flight(task: FlightTask, keep: str = "") -> FlightOutcome:
         if verdict is None:
             continue
         counts[f"{code} {verdict}"] += 1
-        alerts.append((t_s, code, alert.text, verdict))
+        text = alert.text
+        own = receiver_pl(t_s, w) if code == "INTEGRITY" else None
+        if own is not None:
+            text += f" [receiver's own HPL {own[0]:.1f} m VPL {own[1]:.1f} m]"
+        alerts.append((t_s, code, text, verdict))
     hours = float(flight.truth.t_s[-1] - flight.truth.t_s[0]) / 3600.0
     return FlightOutcome(
         task,
