@@ -457,6 +457,8 @@ class Detection:
     label: str
     runs: int
     delays: list[float] = field(default_factory=list)
+    order: int = 0
+    """The case's place in its section (bench/integrity.py's list)."""
 
     def cells(self) -> str:
         if not self.delays:
@@ -475,7 +477,7 @@ def det_synthetic(section: str, index: int, runs: int, seed: int) -> Detection:
     else:
         case, receivers, s = ib.SINGLE_CASES[index], 1, seed + 100 + index
     mine, _ = ib.run_case(case, runs, receivers, s)
-    return Detection(section, case.label, runs, sorted(mine.delays or []))
+    return Detection(section, case.label, runs, sorted(mine.delays or []), index)
 
 
 def det_ins(row: int, index: int, runs: int, seed: int) -> Detection:
@@ -488,7 +490,7 @@ def det_ins(row: int, index: int, runs: int, seed: int) -> Detection:
         out = ib.ins_flight(case, grade, rx, s, False)
         if out.first_s is not None and out.fault is not None:
             delays.append(out.first_s - out.fault.t_start_s)
-    return Detection(f"INS {grade} {rx} rx", case.label, runs, sorted(delays))
+    return Detection(f"INS {grade} {rx} rx", case.label, runs, sorted(delays), index)
 
 
 def det_sim_flight(name: str, real: bool) -> Detection:
@@ -504,7 +506,9 @@ def det_sim_flight(name: str, real: bool) -> Detection:
     ev = next(e for e in flight.events if e.kind in ("step", "ramp", "dither"))
     after = [a[0] - ev.t_start_s for a in res.alarms if a[0] >= ev.t_start_s]
     label = f"{name}{' realistic' if real else ''}"
-    return Detection("simulator flights, monitor", label, 1, after[:1])
+    return Detection(
+        "simulator flights, monitor", label, 1, after[:1], 2 * (name != "ramp_fault") + real
+    )
 
 
 def det_service(name: str, grade: str) -> Detection:
@@ -527,7 +531,8 @@ def det_service(name: str, grade: str) -> Detection:
         if (a.code.value == "FAULT" or (a.code.value == "INTEGRITY" and a.text.startswith("lost")))
         and t_rx - epoch0 >= ev["t_start_s"]
     ]
-    return Detection("fixtures through the service", f"{name} ({grade})", 1, hits[:1])
+    order = 2 * (name != "ramp_fault") + (grade != "mems")
+    return Detection("fixtures through the service", f"{name} ({grade})", 1, hits[:1], order)
 
 
 def cost(fn: Any, args: tuple[Any, ...]) -> float:
@@ -698,6 +703,12 @@ def print_false(outcomes: list[FlightOutcome], limit: int) -> None:
         print(f"  {label} seed {seed} t {t:7.1f}  {code} {text}")
 
 
+SECTION_ORDER = (
+    "synthetic 2 rx", "synthetic 1 rx", "INS tactical 1 rx", "INS mems 1 rx", "INS tactical 2 rx",
+    "simulator flights, monitor", "fixtures through the service",
+)  # fmt: skip
+
+
 def print_detection(dets: list[Detection], baseline: dict[str, Any]) -> bool:
     """Print the detection table against the baseline; True when none is slower."""
     print(
@@ -707,8 +718,7 @@ def print_detection(dets: list[Detection], baseline: dict[str, Any]) -> bool:
     cols = f"{'det':>7} {'t med':>6} {'t max':>6} | {'baseline':>21}"
     print(f"{'section':<30} {'case':<26} {cols} | verdict")
     ok = True
-    order = {d.section: i for i, d in enumerate(dets)}
-    for d in sorted(dets, key=lambda d: order[d.section]):
+    for d in sorted(dets, key=lambda d: (SECTION_ORDER.index(d.section), d.order)):
         base = baseline.get(d.section, {}).get(d.label)
         verdict = compare(d, base)
         ok = ok and not verdict.startswith("SLOWER")
