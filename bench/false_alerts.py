@@ -747,8 +747,9 @@ def main() -> int:
     ap.add_argument("--only", default="", help="only the profiles whose label has this word")
     ap.add_argument("--keep", default="", help="folder for every flight's files and replay")
     args = ap.parse_args()
+    version = code_version()  # now: the checkout may move on during a long run
     print(f"command: python {shlex.join(sys.argv)}")
-    print(f"code: {code_version()}")
+    print(f"code: {version}")
     logging.basicConfig(level=logging.ERROR)
     t0 = time.perf_counter()
     site, _, _ = _raw_setup()
@@ -802,7 +803,7 @@ def main() -> int:
     baseline = json.loads(BASELINE.read_text()) if BASELINE.is_file() else {}
     ok = print_detection(dets, baseline)
     if args.write_baseline:
-        data: dict[str, Any] = {"_code": code_version()}
+        data: dict[str, Any] = {"_code": version}
         for d in dets:
             data.setdefault(d.section, {})[d.label] = {"runs": d.runs, "delays": d.delays}
         BASELINE.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
