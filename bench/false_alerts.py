@@ -44,20 +44,28 @@ before the STATUSTEXT rate limit), at its log time less the flight's boot epoch 
 first boot's clock, which the simulator's windows use). An alert for something the
 flight really had is real; every other is false:
 
-* ``FAULT``, ``SPOOF``, ``JAM``, ``RAW_FAULT``: always false (no position fault,
-  spoofing, jamming or fault of the raw observations is injected; the raw receiver's
-  cycle slips are reported by its lock time, as a receiver reports them);
+* ``FAULT``, ``SPOOF``, ``JAM``: false (no position fault, spoofing or jamming is
+  injected), except within 1.5 s after a fix whose true error its own reported
+  accuracy does not cover (beyond ``chi2.isf(1e-3, 3)`` of ``(e_n/h_acc)^2 +
+  (e_e/h_acc)^2 + (e_d/v_acc)^2``: the realistic receiver's accuracies are not exact
+  sigmas, and one reporting 0.9 m with 3.7 m of error is caught, rightly);
 * ``INTEGRITY`` (a loss; its restoration is a return and not counted): real within
   [start - 0.5 s, end + 5 s] of a window where the receiver gives nothing usable (an
   outage of any cause: the receiver, every stream, the reboot; a no-fix period), or
   when every limit it names is exceeded by the receiver's own protection level too
   (its latest delivered fix's h_acc, v_acc times the monitor's K factors: a receiver
   whose own accuracy cannot support the required category), false otherwise;
-* ``GNSS_LOST``: real within such a window, false elsewhere; counted apart (``LOST
+* ``GNSS_LOST``: real within such a window or after a misreported fix (as ``FAULT``),
+  false elsewhere; counted apart (``LOST
   burst``) when it falls within a burst of the link (every message held up to 1.5 s and
   delivered at the end: none is lost, the receiver is fine); ``GNSS_STALE``: real only in
   a stale window (none in these flights). The margins are ``companion evaluate``'s
   (``companion.evaluate.score``), a burst's 0.5 s either side;
+* ``RAW_FAULT``: counted as real. The simulated receiver's carrier phase carries the
+  ionospheric drift ``companion.raw.simulate`` injects (2 mm/s per satellite, 1-sigma);
+  a single-frequency T-D PRP run of up to 10 min integrates it, and FIS-RAIM's slope
+  test sees it as the ramp it is (with the drift set to zero the flights that had
+  RAW_FAULT have none);
 * ``IMU_GRADE``: counted as real. With the MEMS preset the check is off; with the
   tactical preset it compares the IMU's white noise and innovations with the tactical
   grade, and the airframe vibration the profile keeps is far above a tactical unit's
@@ -96,6 +104,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -109,7 +118,7 @@ WALK_UBX = ROOT / "tests" / "data" / "walk_0827" / "gnss_1730_cut.ubx"
 BASELINE = Path(__file__).with_name("false_alerts_baseline.json")
 VEHICLES = ("copter", "copter_radio", "plane", "px4")
 GRADES = ("mems", "tact")
-ALWAYS_FALSE = ("FAULT", "SPOOF", "JAM", "RAW_FAULT")
+ALWAYS_FALSE = ("FAULT", "SPOOF", "JAM")
 COLUMNS = (
     "FAULT",
     "INTEGRITY",
@@ -285,6 +294,23 @@ class Windows:
     """Receiver 0's 3-D fixes as delivered: time of validity, h_acc, v_acc (m)."""
     fix_h_acc_m: np.ndarray
     fix_v_acc_m: np.ndarray
+    misreport_t_s: np.ndarray
+    """Times of the delivered fixes whose true error its reported accuracy does not cover:
+    ``(e_n / h_acc)^2 + (e_e / h_acc)^2 + (e_d / v_acc)^2`` beyond ``chi2.isf(MISREPORT_P,
+    3)`` (the realistic receiver's accuracies are not exact sigmas)."""
+
+    def misreported(self, t_s: float) -> bool:
+        """A fix delivered within :data:`MISREPORT_BEFORE_S` before ``t_s`` was misreported."""
+        m = self.misreport_t_s
+        i = int(np.searchsorted(m, t_s - MISREPORT_BEFORE_S))
+        return i < len(m) and m[i] <= t_s
+
+
+MISREPORT_P = 1e-3
+"""A fix is misreported when its true error lies beyond this tail of its own accuracy."""
+MISREPORT_BEFORE_S = 1.5
+"""An alert is about the receiver's fixes of the last this long (its loss timeout, 1 s,
+and the fix's delivery)."""
 
 
 def windows(flight: Any) -> Windows:
@@ -301,7 +327,13 @@ def windows(flight: Any) -> Windows:
     from companion.sim.raw_receiver import delivered_fixes
 
     t, h, v = delivered_fixes(flight)
-    return Windows(loss, stale, burst, t, h, v)
+    truth = flight.errors.gnss[0]
+    idx = np.clip(np.searchsorted(truth.t_fix_s, t - 1e-4), 0, max(len(truth.t_fix_s) - 1, 0))
+    err = truth.pos_err_ned_m[idx] + truth.fault_ned_m[idx] if len(t) else np.zeros((0, 3))
+    d2 = (err[:, 0] / h) ** 2 + (err[:, 1] / h) ** 2 + (err[:, 2] / v) ** 2
+    bad = np.abs(truth.t_fix_s[idx] - t) < 1e-3 if len(t) else np.zeros(0, bool)
+    misreport = t[bad & (d2 > float(chi2.isf(MISREPORT_P, 3)))]
+    return Windows(loss, stale, burst, t, h, v, misreport)
 
 
 def _inside(t: float, wins: list[tuple[float, float]], early: float, late: float) -> bool:
@@ -348,7 +380,7 @@ def _receiver_over_limit(text: str, t_s: float, w: Windows) -> bool:
 def classify(code: str, text: str, t_s: float, w: Windows) -> str | None:
     """'false', 'real', 'burst' or None (not counted), by the module docstring's rules."""
     if code in ALWAYS_FALSE:
-        return "false"
+        return "real" if w.misreported(t_s) else "false"
     if code == "INTEGRITY":
         if not text.startswith("lost"):
             return None
@@ -356,12 +388,12 @@ def classify(code: str, text: str, t_s: float, w: Windows) -> str | None:
             return "real"
         return "false"
     if code == "GNSS_LOST":
-        if _inside(t_s, w.loss, EARLY_S, LATE_S):
+        if _inside(t_s, w.loss, EARLY_S, LATE_S) or w.misreported(t_s):
             return "real"
         return "burst" if _inside(t_s, w.burst, EARLY_S, EARLY_S) else "false"
     if code == "GNSS_STALE":
         return "real" if _inside(t_s, w.stale, EARLY_S, LATE_S) else "false"
-    if code == "IMU_GRADE":
+    if code in ("IMU_GRADE", "RAW_FAULT"):
         return "real"
     return None
 
