@@ -38,6 +38,7 @@ from companion.mavlink.logs import open_flight_log
 from companion.mavlink.tlog import TlogError, TlogWriter, describe_file
 from companion.pipeline import Pipeline
 from companion.raw.obs import NavWords, PvtFix, RawEpoch, ReceiverStatus
+from companion.types import Alert
 
 RawItem = RawEpoch | NavWords | PvtFix | ReceiverStatus
 
@@ -68,6 +69,9 @@ class ReplaySummary:
     raw_rejections: dict[str, int] = field(default_factory=dict)
     integrity_stats: dict[str, int] = field(default_factory=dict)
     """The integrity monitor's counters (rejections and tests by reason)."""
+    alert_log: tuple[tuple[float, Alert], ...] = ()
+    """Every alert raised, in order, with the log time of the record (or timer tick) that
+    raised it: what was raised, before the STATUSTEXT rate limit (``bench/false_alerts.py``)."""
 
     def to_text(self) -> str:
         """A short human summary."""
@@ -167,6 +171,12 @@ def replay(
     last_t = 0.0
     due_s = pipeline.next_due_s()
     count = 0
+    alert_log: list[tuple[float, Alert]] = []
+
+    def log_alerts(t_s: float) -> None:
+        """Stamp the alerts the last call raised with its log time."""
+        alert_log.extend((t_s, a) for a in pipeline.alerts[len(alert_log) :])
+
     with TlogWriter(out_path) as writer:
 
         def timer_until(t_s: float) -> None:
@@ -176,6 +186,7 @@ def replay(
                 # at its due time (the first is due at once: at the first record)
                 t_due_s = max(due_s, last_t)
                 frames = pipeline.on_timer(t_due_s)
+                log_alerts(t_due_s)
                 if frames:
                     writer.write_frames(t_due_s, frames)
                 next_s = pipeline.next_due_s()
@@ -191,6 +202,7 @@ def replay(
                 t_raw_s = max(next_raw[0], last_t)
                 timer_until(t_raw_s)
                 frames = pipeline.on_raw(next_raw[1], t_raw_s)
+                log_alerts(t_raw_s)
                 if frames:
                     writer.write_frames(t_raw_s, frames)
                 last_t = t_raw_s
@@ -199,6 +211,7 @@ def replay(
             timer_until(t_rx_s)
             last_t = t_rx_s
             frames = pipeline.on_message(msg, t_rx_s)
+            log_alerts(t_rx_s)
             if frames:
                 writer.write_frames(t_rx_s, frames)
             due_s = pipeline.next_due_s()
@@ -227,4 +240,5 @@ def replay(
             **(pipeline.raw.rejections() if pipeline.raw is not None else {}),
             **(raw_reader_rejections or {}),
         },
+        alert_log=tuple(alert_log),
     )

@@ -95,6 +95,20 @@ def test_a_slow_imu_is_not_used_to_dead_reckon():
     assert navs.switches <= 2
 
 
+def test_a_slow_imu_stays_slow_across_a_restart():
+    """A 10 Hz IMU, then 4 s of silence of every stream: the navigation restarts, and the
+    pass-through carries from the first fix after it (before, the restart forgot the
+    measured rate and the blend carried a radio's 1.3 Hz IMU until its first window
+    closed: copter_radio_realistic's first fix after a silence excluded as a FAULT)."""
+    engine = Engine(EngineConfig(navigator="blend"))
+    stream = line_stream(40.0, line=LINE, imu_hz=10.0, gnss_hz=5.0)
+    outs = run((s for s in stream if not 25.0 <= s.t_s < 29.0), engine)
+    assert AlertCode.DATA_BACK in codes(outs)
+    navs = engine.navigators  # the restarted navigation's
+    assert navs.switches == 0 and navs.navigator is navs.fallback
+    assert not navs.imu_rate.usable
+
+
 def test_a_fast_imu_is_used():
     engine = Engine(EngineConfig(navigator="blend"))
     run(line_stream(20.0, line=LINE, imu_hz=50.0, gnss_hz=5.0), engine)

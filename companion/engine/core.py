@@ -322,6 +322,8 @@ class Engine:
             cfg.min_imu_rate_hz,
             cfg.imu_rate_hold_s,
         )
+        if old is not None:
+            self.navigators.imu_rate = old.imu_rate.restarted()  # a slow IMU stays slow
         if old is not None and isinstance(old.primary, BlendNavigator):
             new = self.navigators.primary
             if isinstance(new, BlendNavigator):

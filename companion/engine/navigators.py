@@ -105,6 +105,20 @@ class ImuRate:
         if not self.usable and t_s - self._good_since_s >= self.hold_s:
             self._set(True)
 
+    def restarted(self) -> ImuRate:
+        """A new measurement of the same stream for a navigation restarted from scratch
+        (after a silence or a reboot: the sample clock may start again): its windows
+        start afresh, and a stream last measured below ``min_rate_hz`` stays unusable
+        until the rate has held for ``hold_s``. A restart does not make a slow stream
+        fast: without this the blend carried a 1.3 Hz radio IMU after every silence
+        until its first window closed, and its first predicted fixes were excluded as
+        faults (copter_radio_realistic at 142.6 s)."""
+        new = ImuRate(self.min_rate_hz, self.hold_s)
+        new.rate_hz = self.rate_hz
+        if self.rate_hz is not None and self.rate_hz < self.min_rate_hz:
+            new.usable = False
+        return new
+
     def timed_out(self) -> None:
         """No IMU sample for the timeout: unusable until the rate has held again."""
         self._window_start_s = None

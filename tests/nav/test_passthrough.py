@@ -150,3 +150,33 @@ def test_velocity_noise_alone_is_no_manoeuvre():
     # noise of 0.1 m/s on each velocity: what is left after its variance is removed is
     # the flooring's small bias, within 1.5x the configured density
     assert nav.horizontal_psd_m2ps3 < 1.5 * nav.config.accel_psd_m2ps3
+
+
+def test_the_vertical_velocity_variance_follows_the_receivers_error_model() -> None:
+    """A 3-D receiver at 5 Hz whose height error is mostly a slow Gauss-Markov wander (the
+    receiver model's white share, 10 %, on top): the height-difference vertical velocity
+    is given the variance its errors really have (within 25 %), not that of independent
+    fixes: 33 times too large, which put a plane's VPL over CAT I's VAL in the landing with
+    the receiver's own VPL at 25 m (bench/false_alerts.py)."""
+    from companion.nav.blend.receiver import GNSS_ERR_TAU_S
+
+    rng = np.random.default_rng(7)
+    sigma, dt, n = 4.0, 0.2, 20_000
+    tau = GNSS_ERR_TAU_S[FixType.FIX_3D]
+    phi = math.exp(-dt / tau)
+    gm = np.zeros(n)
+    gm[0] = rng.normal(0.0, sigma * math.sqrt(0.9))
+    for k in range(1, n):
+        gm[k] = phi * gm[k - 1] + sigma * math.sqrt(0.9 * (1 - phi * phi)) * rng.normal()
+    err = gm + rng.normal(0.0, sigma * math.sqrt(0.1), n)
+    nav = PassthroughNavigator()
+    vz_err, vz_var = [], []
+    for k in range(n):
+        nav.on_gnss(meas(k * dt, [0.0, 0.0, err[k]], [0.0, 0.0], sigma_m=sigma), gate=False)
+        if k > 100:
+            state = nav.predict(k * dt)
+            assert state is not None
+            vz_err.append(state.vel_ned_mps[2])
+            vz_var.append(state.vel_cov_ned_m2ps2[2, 2])
+    ratio = float(np.mean(vz_var)) / float(np.var(vz_err))
+    assert 0.8 < ratio < 1.25, ratio

@@ -90,3 +90,52 @@ def test_the_same_fix_offered_twice_keeps_the_chain() -> None:
         for _ in range(2):
             meter.on_fix(0, t, (0.0, 5.0 * t), (0.08, 5.0), (2e-4, 2e-4), (4e-4, 4e-4), 30.0)
     assert meter.excess_var_ne_m2ps2[0] > 50.0 * 0.08**2
+
+
+def test_a_bias_seen_in_rtk_stands_through_positions_too_coarse_to_see_it() -> None:
+    """15 s of RTK fixed with a 0.08 m/s north bias, 20 s of 3-D fixes (1 m position
+    noise, 2.5 m reported) with the same velocity, then RTK without the bias: the excess
+    measured in RTK stands through the 3-D stretch, whose positions could not have seen
+    it (before, it fell to zero within 2 s and the blend drifted metres on the biased
+    velocity while claiming decimetres), and it is gone once RTK shows no bias."""
+    rng = np.random.default_rng(5)
+    meter = VelocityErrorMeter(0.1)
+    seen: dict[str, list[float]] = {"rtk": [], "3d": [], "after": []}
+    for k in range(60 * 5):
+        t = k * 0.2
+        phase = "rtk" if t < 15.0 else "3d" if t < 35.0 else "after"
+        coarse = phase == "3d"
+        pos = np.array([0.0, 5.0 * t]) + rng.normal(0.0, 1.0 if coarse else 0.005, 2)
+        bias = 0.0 if phase == "after" else 0.08
+        vel = np.array([bias, 5.0]) + rng.normal(0.0, 0.02, 2)
+        r_pos = 2.5**2 if coarse else 0.015**2
+        fix = FixType.FIX_3D if coarse else FixType.RTK_FIXED
+        ex_n, _ = meter.on_fix(
+            0, t, (pos[0], pos[1]), (vel[0], vel[1]), (r_pos, r_pos), (4e-4, 4e-4), 30.0, fix
+        )
+        seen[phase].append(ex_n)
+    assert seen["rtk"][-1] > 50.0 * 0.08**2
+    assert min(seen["3d"]) > 10.0 * 0.08**2, min(seen["3d"])
+    assert seen["after"][-1] == 0.0
+
+
+def test_a_velocity_seen_at_rest_is_its_error_until_the_positions_judge() -> None:
+    """Seeded at rest with the receiver's own velocity (0.12 m/s north at a standstill):
+    that is its error from the first fix on; RTK baselines that show a velocity as good
+    as reported then clear it."""
+    meter = VelocityErrorMeter(0.1)
+    assert meter.seed_at_rest(0, (0.12, -0.01), (4e-4, 4e-4))[1] == 0.0  # within its report
+    assert meter.excess_var_ne_m2ps2[0] >= 0.12**2
+    rng = np.random.default_rng(6)
+    excess = meter.excess_var_ne_m2ps2
+    for k in range(15 * 5):
+        t = k * 0.2
+        pos = rng.normal(0.0, 0.005, 2)
+        vel = rng.normal(0.0, 0.02, 2)
+        excess = meter.on_fix(
+            0, t, (pos[0], pos[1]), (vel[0], vel[1]), (2.25e-4, 2.25e-4), (4e-4, 4e-4), 30.0,
+            FixType.RTK_FIXED,
+        )  # fmt: skip
+        if t < 2.0:
+            assert excess[0] >= 0.12**2
+    assert excess == (0.0, 0.0)

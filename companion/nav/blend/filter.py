@@ -35,6 +35,7 @@ from companion.nav.blend.history import (
 from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.rate_drift import RateDrift
 from companion.nav.blend.receiver import GNSS_ERR_TAU_S, ReceiverError
+from companion.nav.blend.rest import at_rest
 from companion.nav.blend.unaided import UnaidedDeparture
 from companion.nav.blend.velocity_error import VelocityErrorMeter
 from companion.nav.frames import LocalFrame, rotation_between_frames
@@ -1005,6 +1006,16 @@ class BlendNavigator:
         vel_ok = np.isfinite(vel)
         vel0 = np.where(vel_ok, vel, 0.0)
         var_v = np.where(vel_ok, r_vel, cfg.init_vel_sigma_mps**2)
+        meter = self._vel_error
+        if meter is not None and vel_ok[0] and vel_ok[1]:
+            speed = math.hypot(vel[0], vel[1])
+            lim_a, lim_g = cfg.align_static_acc_std_mps2, cfg.align_static_gyro_std_radps
+            if at_rest(pre, speed, lim_a, lim_g):  # standing: the velocity is its error
+                ex_n, ex_e = meter.seed_at_rest(
+                    meas.receiver_id, (float(vel[0]), float(vel[1])), (r_vel_l[0], r_vel_l[1])
+                )
+                var_v[0] += ex_n
+                var_v[1] += ex_e
         pos0 = meas.pos_ned_m - mat_nb @ self._gnss.lever_b_m + vel0 * (t0 - meas.t_s)
         mech.initialise(t0, pos0, vel0, q0)
         p = np.zeros((N_STATE, N_STATE))

@@ -32,7 +32,7 @@ GNSS_ERR_TAU_S: dict[FixType, float] = {
 residual atmospheric errors wander over tens of seconds to minutes; the order of magnitude
 matters more than the figure (see the module docstring)."""
 
-_DEFAULT_TAU_S = 300.0
+DEFAULT_TAU_S = 300.0
 """Correlation time (s) of a fix type not in :data:`GNSS_ERR_TAU_S`."""
 
 
@@ -64,7 +64,7 @@ class ReceiverError:
         self.bias_ned_m = [0.0, 0.0, 0.0]
         self.var_ned_m2 = np.zeros(3)
         self.fix_type: FixType | None = None
-        self.tau_s = _DEFAULT_TAU_S
+        self.tau_s = DEFAULT_TAU_S
         self._var_l = [0.0, 0.0, 0.0]
 
     def follow(self, fix_type: FixType, var: list[float]) -> str | None:
@@ -84,7 +84,7 @@ class ReceiverError:
             if abs(v - o) > 0.05 * o:
                 small_change = False
         if fix_type != self.fix_type or (jump and self.fix_type is not None):
-            self.tau_s = self._tau_override_s or GNSS_ERR_TAU_S.get(fix_type, _DEFAULT_TAU_S)
+            self.tau_s = self._tau_override_s or GNSS_ERR_TAU_S.get(fix_type, DEFAULT_TAU_S)
             self.fix_type = fix_type
             self.bias_ned_m = [0.0, 0.0, 0.0]
             self._set_var(var)

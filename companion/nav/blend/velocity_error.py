@@ -25,9 +25,14 @@ window, ``dt`` the fix interval: the same low-frequency PSD, ``2 sigma^2 T``). W
 varies from baseline to baseline is not counted: the trapezoid rule also errs by the
 motion between fixes (a walker's gait sampled at 4 Hz), which is no error of the
 receiver's. RTK positions (1-2 cm) see a 0.05 m/s bias within seconds; a 3D fix's
-metre-level position noise sees nothing and the reported accuracy stands. A change of
-fix type or a jump of the reported position variance (a new error regime of the
-position, :mod:`.receiver`) starts a new chain.
+metre-level position noise sees nothing: alone, the reported accuracy stands; after
+RTK, the error last measured stands (a persistent error ``b^2`` raises the mean ratio
+by ``b^2 mean(1/s)``: baselines for which that stays within the bound could not have
+seen it, and the velocity did not improve because the positions became too coarse to
+measure it; fused as good to 4 cm/s through 20 s of 3-D fixes, a 0.3 m/s error drifted
+the blend metres off while it claimed decimetres, and the first RTK fix after was
+excluded as a fault). A change of fix type or a jump of the reported position variance
+(a new error regime of the position, :mod:`.receiver`) starts a new chain.
 
 The vertical is left as reported (GPS_RAW_INT has no vertical velocity). Pure: no I/O,
 no clock.
@@ -76,9 +81,41 @@ class VelocityErrorMeter:
         self.receiver_id: int | None = None
         self.excess_var_ne_m2ps2 = (0.0, 0.0)
         """The velocity variance beyond the reported one, north and east, m^2/s^2."""
+        self._held = [0.0, 0.0]
+        """The persistent error (m^2/s^2) last measured by baselines able to see it: it
+        stands while the baselines since could not have seen it (:meth:`_excess`)."""
+        self._held_corr = 1.0
+        """Its white equivalent's factor, ``2 T / dt``, when it was measured."""
         self._regime: object = None
         self._last_pos_var = (0.0, 0.0)
         self.restart_chain()
+
+    def seed_at_rest(
+        self,
+        receiver_id: int,
+        vel_ne_mps: tuple[float, float],
+        vel_var_ne_m2ps2: tuple[float, float],
+    ) -> tuple[float, float]:
+        """The vehicle stands still (:func:`~companion.nav.blend.rest.at_rest`): the
+        receiver's horizontal velocity is its error. Beyond its reported variance by the
+        test's own bound (one sample, false-alarm probability :data:`FALSE_ALARM_PROB`),
+        it is held as the persistent error last measured, until baselines that could
+        see it show otherwise (:meth:`_excess`). Returns the excess variance to add,
+        north and east (m^2/s^2)."""
+        if receiver_id != self.receiver_id:
+            self.receiver_id = receiver_id
+            self._samples.clear()
+            self.restart_chain()
+        bound = self._bounds[1]
+        self._held = [
+            v * v if v * v > bound * r else 0.0
+            for v, r in zip(vel_ne_mps, vel_var_ne_m2ps2, strict=True)
+        ]
+        self.excess_var_ne_m2ps2 = (
+            self._held[0] * self._held_corr,
+            self._held[1] * self._held_corr,
+        )
+        return self.excess_var_ne_m2ps2
 
     def restart_chain(self) -> None:
         """Forget the open baseline (a new frame, a restart): the measured excess stays."""
@@ -110,6 +147,7 @@ class VelocityErrorMeter:
             self.receiver_id = receiver_id
             self._samples.clear()
             self.excess_var_ne_m2ps2 = (0.0, 0.0)
+            self._held = [0.0, 0.0]
             self.restart_chain()
         values = (t_s, *pos_ne_m, *vel_ne_mps, *pos_var_ne_m2, *vel_var_ne_m2ps2, tau_s)
         if not all(map(math.isfinite, values)):
@@ -123,6 +161,8 @@ class VelocityErrorMeter:
             v > 4.0 * o or v < 0.25 * o for v, o in zip(pos_var_ne_m2, last_var, strict=True)
         )
         self._regime, self._last_pos_var = regime, pos_var_ne_m2
+        if new_regime:  # baselines of another position noise: their verdict is held
+            self._samples.clear()
         if (
             new_regime
             or prev is None
@@ -165,7 +205,7 @@ class VelocityErrorMeter:
         samples = self._samples
         k = len(samples)
         if k < MIN_BASELINES:
-            return (0.0, 0.0)
+            return (self._held[0] * self._held_corr, self._held[1] * self._held_corr)
         bound = self._bounds[k]
         span = sum(s[4] for s in samples) / k
         # the persistent error (a bias lasting the window) is correlated over it: fused at
@@ -174,15 +214,25 @@ class VelocityErrorMeter:
         # baseline is not counted: the trapezoid rule also errs by the motion between
         # fixes (a walker's gait sampled at 4 Hz), which is no error of the receiver's
         corr = 2.0 * k * BASELINE_S / span if span > 0.0 else 1.0
+        self._held_corr = corr
         out = []
         for i in range(2):
             errs = [s[i] for s in samples]
             ratio = sum(e * e / s[2 + i] for e, s in zip(errs, samples, strict=True)) / k
             if ratio <= bound:
-                out.append(0.0)
+                # a persistent error b^2 raises the mean ratio by b^2 mean(1/s): could these
+                # baselines have seen the one last measured? Then it is gone. If not (a 3-D
+                # fix's metre-level positions after RTK), it stands: the receiver's velocity
+                # did not improve because its positions became too coarse to measure it
+                held = self._held[i]
+                if held * sum(1.0 / s[2 + i] for s in samples) / k > bound - 1.0:
+                    self._held[i] = 0.0
+                    held = 0.0
+                out.append(held * corr)
                 continue
             mean = sum(errs) / k
             var_about = sum((e - mean) ** 2 for e in errs) / (k - 1)
             persistent = max(0.0, mean * mean - var_about / k)
+            self._held[i] = persistent
             out.append(persistent * corr)
         return (out[0], out[1])
