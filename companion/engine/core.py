@@ -592,6 +592,7 @@ class Engine:
             gyro_bias_sigma_radps=max(cfg.gyro_bias_sigma_radps, mems.gyro_bias_sigma_radps),
         )
         self._coast_config = CoastConfig.for_grade("mems")
+        self.integrity.spoof.widen_grade("mems")
         self._grade_widened = True
         self.imu_check = None
         self.imu_innovations = None

@@ -113,9 +113,11 @@ def from_output(
 
 
 def summary_dict(summary: Any) -> dict[str, Any]:
-    """A :class:`companion.replay.ReplaySummary` as JSON, without the wall-clock time."""
+    """A :class:`companion.replay.ReplaySummary` as JSON, without the wall-clock time and
+    the alert log (the alerts are recorded as the STATUSTEXTs the service sent)."""
     out = dataclasses.asdict(summary)
     out.pop("wall_s", None)
+    out.pop("alert_log", None)
     return {k: dict(sorted(v.items())) if isinstance(v, dict) else v for k, v in out.items()}
 
 

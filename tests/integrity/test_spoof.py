@@ -84,12 +84,14 @@ def fly(
     step: tuple[float, float] | None = None,
     acc_noise: float = 0.05,
     vel_noise: float = 0.05,
+    lag_s: float = 0.0,
 ) -> Flight:
     """Samples (attitude, IMU, fixes) of a level turn at 20 m/s, yaw rate 0.05 rad/s; IMU
     white noise ``acc_noise`` per sample, GNSS velocity noise ``vel_noise``, a body-frame
     accelerometer bias. ``drag``: (onset s, acceleration m/s^2, release s) of a consistent
     drag of position and velocity, to at most 5 m/s; ``step``: (time s, m/s) a step of
-    the reported velocity alone (what a spoofer letting go looks like)."""
+    the reported velocity alone (what a spoofer letting go looks like); ``lag_s``: the
+    fixes report the truth that long before their time."""
     rng = np.random.default_rng(seed)
     speed, rate = 20.0, 0.05
     bias_b = np.array([0.05, -0.03, 0.02])
@@ -111,7 +113,9 @@ def fly(
             samples.append(_att(t, 0.0, 0.0, yaw, w_b))
         samples.append(_imu(t, f_b, w_b))
         if k % FIX_EVERY == 0 and t > 0.0:
-            p_rep, v_rep = pos.copy(), vel.copy()
+            yaw_v = rate * (t - lag_s)
+            p_rep = speed / rate * np.array([math.sin(yaw_v), 1.0 - math.cos(yaw_v), 0.0])
+            v_rep = speed * np.array([math.cos(yaw_v), math.sin(yaw_v), 0.0])
             if drag is not None and drag[0] < t < drag[2]:
                 tau = t - drag[0]
                 t_max = 5.0 / drag[1]
@@ -127,18 +131,25 @@ def fly(
     return Flight(samples, truth_pos, truth_vel)
 
 
-def _fix(t: float, vel: np.ndarray, rid: int = 0) -> GnssFix:
+def _fix(t: float, vel: np.ndarray, rid: int = 0, placed_s: float = 0.0) -> GnssFix:
     return GnssFix(
         t_s=t, t_rx_s=t, receiver_id=rid, fix_type=FixType.FIX_3D, lat_rad=0.0, lon_rad=0.0,
         alt_msl_m=100.0, alt_hae_m=None, vel_ne_mps=vel[:2].copy(),
         ground_speed_mps=float(np.hypot(*vel[:2])), course_rad=0.0, h_acc_m=2.0,
-        v_acc_m=3.0, vel_acc_mps=0.1, hdop=1.0, vdop=1.5, satellites=12,
+        v_acc_m=3.0, vel_acc_mps=0.1, hdop=1.0, vdop=1.5, satellites=12, placed_s=placed_s,
     )  # fmt: skip
 
 
-def run(flight: Flight, config: SpoofConfig | None = None, flags: dict[float, bool] | None = None):
+def run(
+    flight: Flight,
+    config: SpoofConfig | None = None,
+    flags: dict[float, bool] | None = None,
+    placed: tuple[float, float, bool] | None = None,
+):
     """Feed the monitor; the navigator is the truth plus 1 m / 0.1 m/s of honest error (a
-    navigator that follows a spoofer is what the monitor must not need)."""
+    navigator that follows a spoofer is what the monitor must not need). ``placed``: (from
+    s, lag s, told) the service places the fixes that much earlier from then on, and
+    says so in ``GnssFix.placed_s`` if told."""
     mon = SpoofMonitor(config or SpoofConfig.for_grade("mems"))
     alerts, rollbacks, stats = [], [], []
     for s in flight.samples:
@@ -149,15 +160,18 @@ def run(flight: Flight, config: SpoofConfig | None = None, flags: dict[float, bo
         else:
             t, p_rep, v_rep = s
             key = round(t, 6)
+            placed_s = placed[1] if placed is not None and t >= placed[0] else 0.0
+            told_s = placed_s if placed is not None and placed[2] else 0.0
             nav = NavState(
                 t, flight.truth_pos[key], flight.truth_vel[key], np.eye(3), 0.01 * np.eye(3)
             )
+            t = t - placed_s
             meas = GnssMeasurement(
                 t, p_rep, np.full(3, 4.0), v_rep, np.full(3, 0.01), FixType.FIX_3D, 0
             )
             flagged = bool(flags and any(a <= t < b for a, b in flags.items()))
             step = mon.on_fix(
-                _fix(t, v_rep),
+                _fix(t, v_rep, placed_s=told_s),
                 meas,
                 nav,
                 airborne=True,
@@ -246,6 +260,36 @@ def test_a_receiver_that_says_it_is_spoofed_is_held_until_its_flag_clears() -> N
     assert ends and ends[0][0] >= 230.0 + mon.config.readmit_s - 0.5
     # nothing ever separated: the IMU could not have seen a drag, the protection says so
     assert "cannot tell" in ends[0][1] and mon.hpl_floor_m() > 0.0 and not mon.excluded(0)
+
+
+def test_the_service_placing_its_fixes_anew_is_not_a_drag() -> None:
+    """Fixes valid 0.6 s before their stamps (a lag not yet measured, 3 sigma of the prior);
+    at 150 s the service places them with it (its own change, told in ``GnssFix.placed_s``):
+    the velocities the test compares with its references move by the turn's acceleration
+    (1 m/s^2) times 0.6 s, which is known and taken out: no SPOOF, no failed fix. Not told,
+    the same change fails the test (a step: no SPOOF either, but the test was blind)."""
+    flight = fly(300.0, 9, lag_s=0.6)
+    mon, alerts, _, stats = run(flight, placed=(150.0, 0.6, True))
+    assert not alerts and mon.stats["failed"] == 0 and float(np.max(stats)) < 0.5
+    untold, _, _, stats = run(flight, placed=(150.0, 0.6, False))
+    assert untold.stats["failed"] > 0 and float(np.max(stats)) > 1.0
+
+
+def test_a_grade_found_worse_widens_the_test_and_starts_it_again() -> None:
+    """The engine's grade check found a 'tactical' IMU to be MEMS: the grade's larger
+    figures are taken (none smaller), every test starts again; a second call changes
+    nothing."""
+    flight = fly(100.0, 10)
+    mon, *_ = run(flight, SpoofConfig.for_grade("tactical"))
+    assert mon._receivers[0].test.running
+    mon.widen_grade("mems")
+    mems = SpoofConfig.for_grade("mems")
+    assert mon.config.acc_bias_z_sigma_mps2 == mems.acc_bias_z_sigma_mps2
+    assert mon.config.tilt_rw_m2ps5 == mems.tilt_rw_m2ps5
+    assert mon._receivers[0].test.config is mon.config
+    assert not mon._receivers[0].test.running and mon.stats["grade_widened"] == 1
+    mon.widen_grade("mems")
+    assert mon.stats["grade_widened"] == 1
 
 
 def test_off_means_no_test() -> None:

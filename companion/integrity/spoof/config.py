@@ -124,7 +124,7 @@ class SpoofConfig:
         g = IMU_GRADES[grade]
         att, att_tau = ATTITUDE_ERROR_BY_GRADE[grade]
         tilt = _G * max(att[0], att[1])
-        params: dict[str, object] = {
+        params: dict[str, object] = {  # GRADE_FIELDS
             "acc_bias_rw_m2ps5": 2.0 * g.acc_instability_mps2**2 / g.acc_tau_s,
             "tilt_rw_m2ps5": 2.0 * tilt**2 / att_tau,
             "acc_vrw_floor_m2ps3": g.acc_noise_density_mps2_rthz**2,
@@ -132,3 +132,12 @@ class SpoofConfig:
         }
         params.update(overrides)
         return cls(**params)  # type: ignore[arg-type]
+
+
+GRADE_FIELDS = (
+    "acc_bias_rw_m2ps5",
+    "tilt_rw_m2ps5",
+    "acc_vrw_floor_m2ps3",
+    "acc_bias_z_sigma_mps2",
+)
+"""The figures :meth:`SpoofConfig.for_grade` takes from an IMU grade."""

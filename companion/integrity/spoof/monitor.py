@@ -32,6 +32,7 @@ the vehicle; Kim, Walter and Powell (solution separation, exclusion and re-admis
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections import Counter
@@ -40,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from companion.integrity.spoof.config import SpoofConfig
+from companion.integrity.spoof.config import GRADE_FIELDS, SpoofConfig
 from companion.integrity.spoof.drag import DragTest, DragVerdict
 from companion.integrity.spoof.episode import Episode, Reference, horizontal_distance2
 from companion.integrity.spoof.inertial import InertialIncrements
@@ -103,6 +104,27 @@ class SpoofMonitor:
             rx.test.reset()
             rx.fails, rx.first_fail_t_s, rx.last = 0, None, None
         self.episodes.clear()
+
+    def widen_grade(self, grade: str) -> None:
+        """The service found the IMU worse than configured (its grade check): every figure
+        ``grade`` gives that is larger than the configuration's is taken, and each test
+        starts again (its references were anchored with the narrow grade's covariance).
+        The in-flight calibrations, the episodes and the IMU's increments are kept."""
+        wide = SpoofConfig.for_grade(grade)
+        cfg = self.config
+        changes = {
+            name: max(getattr(cfg, name), getattr(wide, name))
+            for name in GRADE_FIELDS
+            if getattr(wide, name) > getattr(cfg, name)
+        }
+        if not changes:
+            return
+        self.config = dataclasses.replace(cfg, **changes)
+        for rx in self._receivers.values():
+            rx.test.config = self.config
+            rx.test.reset()
+            rx.fails, rx.first_fail_t_s = 0, None
+        self.stats["grade_widened"] += 1
 
     # ------------------------------------------------------------------ inputs
 
