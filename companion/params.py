@@ -424,6 +424,8 @@ TABLE: tuple[tuple[str, str], ...] = (
     ("SPF_READMIT_PFA", "spoof.readmit_false_alarm_prob"),
     ("SPF_CALM", "spoof.calm_s"),
     ("SPF_LAG_FLOOR", "spoof.lag_sigma_floor_s"),
+    ("SPF_VERIFY_A", "spoof.verified_accel_mps2"),
+    ("SPF_VERIFY_T", "spoof.verified_window_s"),
 )
 """(parameter name, configuration key) in index order; ``key[i]`` is item ``i`` of a
 fixed-length list. New parameters go at the end of their block."""

@@ -50,6 +50,7 @@ from companion.types import (
     IntegrityReport,
     InterferenceState,
     LandedState,
+    NamedValue,
     NavSolution,
     Output,
 )
@@ -276,6 +277,11 @@ class IntegrityMonitor:
             hpl_floor_m=self.spoof.hpl_floor_m(),
         )
         state = self.spoof.state()
+        if not any(isinstance(out, IntegrityReport) for out in outputs):
+            return outputs
+        verified = self.spoof.verified_mps2()
+        if math.isfinite(verified):  # at the report's rate: what the drag test can see
+            outputs = [*outputs, NamedValue(t, "CMP_SPF_A", verified)]
         if state is InterferenceState.UNKNOWN:
             return outputs
         return [

@@ -292,6 +292,19 @@ def test_a_grade_found_worse_widens_the_test_and_starts_it_again() -> None:
     assert mon.stats["grade_widened"] == 1
 
 
+def test_clean_only_while_the_test_could_see_a_fast_drag() -> None:
+    """GNSS_INTEGRITY's "clean" means the drag test would see 0.5 m/s^2 within 10 s: on a
+    quiet stream once the wander is measured; with 3 m/s^2 of vibration per 50 Hz sample
+    (0.18 m^2/s^3) it cannot, and the verdict is "unknown" with the bound published."""
+    mon, alerts, _, _ = run(fly(300.0, 11))
+    assert not alerts and mon.verified_mps2() <= 0.5
+    assert mon.state() is InterferenceState.CLEAN
+    noisy, alerts, _, _ = run(fly(300.0, 11, acc_noise=3.0))
+    assert not alerts and noisy.stats["tested"] > 1000
+    assert 0.5 < noisy.verified_mps2() < math.inf
+    assert noisy.state() is InterferenceState.UNKNOWN
+
+
 def test_off_means_no_test() -> None:
     mon, alerts, _, _ = run(fly(300.0, 8, drag=(200.0, 0.5, 1000.0)), SpoofConfig(enabled=False))
     assert not alerts and mon.stats["tested"] == 0

@@ -110,6 +110,12 @@ class SpoofConfig:
     readmit_false_alarm_prob: float = ranged(1e-2, gt=0.0, lt=1.0)
     """... within the chi-square (2 dof) quantile of this probability: an agreement, not
     the mere absence of a detection."""
+    verified_accel_mps2: float = ranged(0.5, gt=0.0)
+    """GNSS_INTEGRITY says spoofing "clean" only while every tested receiver's drag test
+    sees a drag this strong ...  (a consistent spoofer's fast drag, Tanil et al.) ..."""
+    verified_window_s: float = ranged(10.0, gt=0.0)
+    """... within this long, s; else "unknown": the IMU stream cannot tell (published as
+    ``CMP_SPF_A``, the smallest drag seen within that window, m/s^2)."""
 
     def __post_init__(self) -> None:
         check_ranges(self)

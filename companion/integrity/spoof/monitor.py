@@ -193,14 +193,29 @@ class SpoofMonitor:
     def state(self) -> InterferenceState:
         """The service's spoofing verdict for GNSS_INTEGRITY: MITIGATED while a receiver is
         held out (the solution is the IMU's), DETECTED while one re-admitted unverified
-        widens the protection level, CLEAN while receivers are tested, else UNKNOWN."""
+        widens the protection level, CLEAN while receivers are tested and every test sees
+        ``verified_accel_mps2`` within ``verified_window_s`` (:meth:`verified_mps2`), else
+        UNKNOWN: a test too blind to see a fast drag does not say clean."""
         if any(not ep.unverified for ep in self.episodes.values()):
             return InterferenceState.MITIGATED
         if self.episodes:
             return InterferenceState.DETECTED
-        if any(rx.last is not None and rx.last.tested for rx in self._receivers.values()):
+        if self.verified_mps2() <= self.config.verified_accel_mps2:
             return InterferenceState.CLEAN
         return InterferenceState.UNKNOWN
+
+    def verified_mps2(self) -> float:
+        """The smallest drag every tested receiver's test sees within ``verified_window_s``
+        (the largest over the receivers), m/s^2; ``inf`` while none is tested."""
+        tested = [
+            rid
+            for rid, rx in self._receivers.items()
+            if rx.last is not None and rx.last.tested and rid not in self.episodes
+        ]
+        if not tested:
+            return math.inf
+        window = self.config.verified_window_s
+        return max(self.detectable_mps2(rid, window) for rid in tested)
 
     def detectable_mps2(self, receiver_id: int, tau_s: float) -> float:
         """The smallest drag receiver ``receiver_id``'s test sees within ``tau_s``, m/s^2."""
