@@ -58,6 +58,10 @@ it, the .tlog record time less the boot epoch):
   the truth while the two are at least 10 m apart.
 * **FAULT in/let-go**: flights with a FAULT alert during the attack / in the 20 s after
   the let-go (the issue: the honest receiver excluded when the spoofer let go).
+* **the service's own bound**: the median of the ``CMP_SPF_A`` it published in the minute
+  before the onset (the smallest drag its test says it sees within 10 s, from the IMU
+  stream's measured noise and the attitude's measured wander): a drag below it is beyond
+  what that stream allows, and the goal line says so.
 * **at end**: the last solution before the let-go: its error, the 1-sigma accuracy it
   claimed (horizontal, or vertical for the vertical drag) and the HPL (VPL) then.
 * **false alerts**: SPOOF, FAULT and JAM alerts raised (the replay's counts, every one
@@ -256,6 +260,9 @@ class Outcome:
     end_claimed_m: float = math.nan
     end_pl_m: float = math.nan
     jam: dict[str, float] = field(default_factory=dict)
+    bound_mps2: float = math.nan
+    """The median CMP_SPF_A the service published in the minute before the onset (the
+    whole flight without one), m/s^2: the drag it said it could see within 10 s."""
     cpu_s: float = 0.0
     """CPU time of the flight's simulation, replay and scoring, s."""
 
@@ -314,6 +321,8 @@ class Published:
     hpl: tuple[np.ndarray, np.ndarray]
     vpl: tuple[np.ndarray, np.ndarray]
     alerts: list[tuple[str, float, str]]
+    spf_a: tuple[np.ndarray, np.ndarray]
+    """CMP_SPF_A: the smallest drag the service's test says it sees within 10 s, m/s^2."""
 
     def times(self, code: str) -> list[float]:
         return [t for c, t, _ in self.alerts if c == code]
@@ -321,7 +330,7 @@ class Published:
 
 def read_published(out: Path, flight: SimFlight) -> Published:
     sol: list[tuple[float, float, float, float, float, float, int]] = []
-    pl: dict[str, list[tuple[float, float]]] = {"CMP_HPL": [], "CMP_VPL": []}
+    pl: dict[str, list[tuple[float, float]]] = {"CMP_HPL": [], "CMP_VPL": [], "CMP_SPF_A": []}
     alerts: list[tuple[str, float, str]] = []
     epoch0 = flight.scenario.epoch0_s
     for t_rec, msg in TlogReader(out):
@@ -362,6 +371,7 @@ def read_published(out: Path, flight: SimFlight) -> Published:
         arr["CMP_HPL"],
         arr["CMP_VPL"],
         alerts,
+        arr["CMP_SPF_A"],
     )
 
 
@@ -415,6 +425,9 @@ def _fly(task: Task) -> Outcome:
         lost,
     )
     case = task.case
+    ts, vs = pub.spf_a
+    before = (ts >= onset - 60.0) & (ts < onset) if case is not None and case.kind else ts >= 0
+    res.bound_mps2 = float(np.median(vs[before])) if before.any() else math.nan
     if case is None or case.kind is None:
         return res
     res.spoof_before_onset = sum(1 for t in pub.times("SPOOF") if t < onset)
@@ -565,6 +578,16 @@ def print_profile(p: Profile, outs: list[Outcome], hours_goal: float) -> list[st
             f"{_pct([x['fix3d_in_loss'] for x in f]):>10} {int(sum(x['jam_end'] for x in f)):>7} "
             f"{sum(o.spoof_before_onset for o in jam):>9}"
         )
+    bounds = np.array([o.bound_mps2 for o in outs if o.case not in ("none", "long")])
+    published = bounds[np.isfinite(bounds)]
+    if len(published):
+        print(
+            "\nthe service's own bound (CMP_SPF_A, the smallest drag its test sees within "
+            f"10 s; median over the minute before each onset): median {np.median(published):.2f}"
+            f" m/s^2, p10 {np.percentile(published, 10):.2f}, p90 "
+            f"{np.percentile(published, 90):.2f} ({len(published)} of {len(bounds)} attacked "
+            "flights published one)"
+        )
     print()
     for label, kinds in (
         ("the attacked flights without a spoofer", ("none",)),
@@ -593,9 +616,16 @@ def print_profile(p: Profile, outs: list[Outcome], hours_goal: float) -> list[st
             if det
             else "nothing detected"
         )
+        bound = float(np.nanmedian([o.bound_mps2 for o in d05]))
+        beyond = (
+            f"; the service published {bound:.2f} m/s^2 as the smallest drag it sees within"
+            " 10 s: beyond what this IMU stream allows"
+            if not ok and bound > 0.5
+            else ""
+        )
         goals.append(
             f"{'PASS' if ok else 'FAIL'}  {p.key}: 0.5 m/s^2 detected within 5 s, "
-            f"error at detection <= 10 m: {len(det)}/{len(d05)} detected, {worst}"
+            f"error at detection <= 10 m: {len(det)}/{len(d05)} detected, {worst}{beyond}"
         )
     d002 = by_case["drag 0.02 h"]
     if p.grade == "tactical" and d002:
