@@ -13,8 +13,11 @@ Two columns come from that module: ``txt/min``, the service's texts a minute of 
 (PASS at most :data:`TEXTS_PER_MINUTE_MAX`; the most in any minute beside it, real
 changes included), and ``events said``, the real events whose start and whose end the
 service said (to compare between two versions of the code: one event, one alert and one
-return). A folder without its tlog, or the whole data folder absent, is skipped with the
-reason.
+return). ``SPOOF`` counts the SPOOF alerts (none may come: no real flight was spoofed);
+``SPF_A m/s2`` is the drag the spoofing test said it would see within 10 s (the
+``CMP_SPF_A`` it published: median, 10th-90th percentile), what that autopilot's IMU
+stream lets it vouch for. A folder without its tlog, or the whole data folder absent, is
+skipped with the reason.
 
 Other rows (another data set scored its own way) join the table as dicts of
 column -> cell: append them to the list :func:`main` passes to :func:`print_table`.
@@ -43,6 +46,7 @@ from companion.config import load_config  # noqa: E402
 from companion.evaluate.against_input import evaluate_against_input  # noqa: E402
 from companion.evaluate.against_input_report import GAP_HEADER, gap_line  # noqa: E402
 from companion.evaluate.events_said import EventsSaid, events_said  # noqa: E402
+from companion.mavlink.tlog import TlogReader  # noqa: E402
 from companion.replay import replay  # noqa: E402
 
 FLIGHTS_DIR = ROOT.parent / "shared" / "realdata" / "flights"
@@ -86,7 +90,25 @@ def run_flight(folder: Path, out_dir: Path) -> dict[str, Any]:
         "evaluate_s": t2 - t1,
         "log_s": summary.log_duration_s,
         "spoof_alerts": summary.alerts.get("SPOOF", 0),
+        "spf_a": published_values(out, "CMP_SPF_A"),
     }
+
+
+def published_values(out: Path, name: str) -> list[float]:
+    """Every NAMED_VALUE_FLOAT ``name`` the service sent in its output .tlog."""
+    return [
+        float(msg.value)
+        for _, msg in TlogReader(out)
+        if msg.get_type() == "NAMED_VALUE_FLOAT" and str(msg.name).rstrip("\x00") == name
+    ]
+
+
+def spf_cell(values: list[float]) -> str:
+    """The drag the spoofing test said it sees within 10 s (CMP_SPF_A): median and range."""
+    if not values:
+        return "-"
+    v = sorted(values)
+    return f"{v[len(v) // 2]:.2f} ({v[len(v) // 10]:.2f}-{v[(9 * len(v)) // 10]:.2f})"
 
 
 def events_cells(ev: EventsSaid) -> dict[str, str]:
@@ -190,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
             **events_cells(run["events"]),
             # no real flight was spoofed: a SPOOF on one is a false alarm
             "SPOOF": f"{run['spoof_alerts']} {'PASS' if run['spoof_alerts'] == 0 else 'FAIL'}",
+            "SPF_A m/s2": spf_cell(run["spf_a"]),
         }
         texts_ok = run["events"].per_minute <= TEXTS_PER_MINUTE_MAX
         spoof_ok = run["spoof_alerts"] == 0
