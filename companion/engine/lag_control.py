@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 from companion.engine.gnss_lag import LagTracker, MeasuredLag
 from companion.engine.lag_ramp import LagRamp
-from companion.nav.gnss import FALLBACK_H_STD_M, UERE_M, UNKNOWN_H_STD_M
+from companion.nav.gnss import h_sigma_m
 from companion.types import AttitudeSample, GnssFix, ImuSample
 
 if TYPE_CHECKING:
@@ -145,7 +145,7 @@ class LagControl:
         if fix is None:
             new = ramp.step(0.0, math.inf)
         else:
-            sigma_m = math.hypot(_h_sigma_m(fix), self.solution_h_acc_m)
+            sigma_m = math.hypot(h_sigma_m(fix), self.solution_h_acc_m)
             new = ramp.step(fix.ground_speed_mps, sigma_m)
         if new == old:
             return
@@ -158,12 +158,3 @@ class LagControl:
             self.engine.self_change(t_s, "lag", text, 0)
         if not ramp.active:
             log.info("GNSS receiver 0: fixes placed with %.1f ms from now on", new * 1e3)
-
-
-def _h_sigma_m(fix: GnssFix) -> float:
-    """A fix's horizontal 1-sigma: reported, else HDOP x UERE, else by fix type (m)."""
-    if fix.h_acc_m is not None:
-        return fix.h_acc_m
-    if fix.hdop is not None:
-        return fix.hdop * UERE_M
-    return FALLBACK_H_STD_M.get(fix.fix_type, UNKNOWN_H_STD_M)

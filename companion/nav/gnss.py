@@ -38,6 +38,15 @@ DEFAULT_VEL_SIGMA_MPS = 0.3
 """Velocity 1-sigma (m/s) when the receiver reports no velocity accuracy."""
 
 
+def h_sigma_m(fix: GnssFix) -> float:
+    """A fix's horizontal 1-sigma: reported, else HDOP x UERE, else by fix type (m)."""
+    if fix.h_acc_m is not None:
+        return fix.h_acc_m
+    if fix.hdop is not None:
+        return fix.hdop * UERE_M
+    return FALLBACK_H_STD_M.get(fix.fix_type, UNKNOWN_H_STD_M)
+
+
 def gnss_measurement(fix: GnssFix, frame: LocalFrame) -> GnssMeasurement:
     """A fix as a measurement in ``frame``, with per-axis variances from its accuracies.
 

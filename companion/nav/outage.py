@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 from companion.nav.earth import radii_of_curvature_m
 from companion.nav.fix_rate import FixRhythm
-from companion.nav.gnss import FALLBACK_H_STD_M, UERE_M, UNKNOWN_H_STD_M
+from companion.nav.gnss import h_sigma_m
 from companion.nav.receiver_checks import (
     ReceiverCheckConfig,
     ReceiverConsistency,
@@ -639,7 +639,7 @@ class OutageMonitor:
             if ofix.vel_ne_mps is not None:
                 dn -= float(ofix.vel_ne_mps[0]) * dt
                 de -= float(ofix.vel_ne_mps[1]) * dt
-            sigma = math.hypot(_h_sigma_m(fix), _h_sigma_m(ofix))
+            sigma = math.hypot(h_sigma_m(fix), h_sigma_m(ofix))
             if math.hypot(dn, de) > cfg.contradiction_sigmas * sigma:
                 return True
         return False
@@ -717,15 +717,6 @@ class OutageMonitor:
         jump = fix.h_acc_m is not None and fix.h_acc_m > cfg.accuracy_jump_ratio * rx.best_hacc_m
         self._degraded = ftype < rx.best_type or jump or corrections_old
         return alerts
-
-
-def _h_sigma_m(fix: GnssFix) -> float:
-    """A fix's horizontal 1-sigma: reported, else HDOP x UERE, else by fix type (m)."""
-    if fix.h_acc_m is not None:
-        return fix.h_acc_m
-    if fix.hdop is not None:
-        return fix.hdop * UERE_M
-    return FALLBACK_H_STD_M.get(fix.fix_type, UNKNOWN_H_STD_M)
 
 
 def _horizontal_distance_m(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
