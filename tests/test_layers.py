@@ -57,6 +57,7 @@ APPLICATION = frozenset(
         "inspection_plot",
         "notify",
         "params",
+        "params_table",
         "pipeline",
         "presets",
         "recorder",
