@@ -36,7 +36,7 @@ from companion.nav.blend.measurement import GnssModel
 from companion.nav.blend.rate_drift import RateDrift
 from companion.nav.blend.receiver import GNSS_ERR_TAU_S, ReceiverError
 from companion.nav.blend.rest import at_rest
-from companion.nav.blend.unaided import UnaidedDeparture
+from companion.nav.blend.unaided import UnaidedDeparture, heading_sensitivity
 from companion.nav.blend.velocity_error import VelocityErrorMeter
 from companion.nav.frames import LocalFrame, rotation_between_frames
 from companion.nav.imu_check import ImuNoiseCheck, ImuNoiseVerdict
@@ -129,6 +129,8 @@ class BlendNavigator:
         """The IMU's gyro carried the attitude's last step (:meth:`GyroCarry.take`)."""
         self._departure_on_imu = False
         """The gap's departure is carried by the IMU's gyro (else by the attitude's rates)."""
+        self._unaided_origin: tuple[float, list[float], list[float]] = (0.0, [0.0] * 3, [0.0] * 3)
+        """IMU time, position and velocity (NED) where the unaided heading began."""
         self.reset()
 
     # ------------------------------------------------------------------ protocol
@@ -412,10 +414,27 @@ class BlendNavigator:
         imu_rate = self.imu_drift.mean_rate()
         self._departure_on_imu = self._imu_covers and imu_rate is not None
         self.departure.start(imu_rate if self._departure_on_imu else self.rate_drift.mean_rate())
+        self._unaided_origin = (mech.t_s, list(mech.pos), list(mech.vel))
         log.info(
             "GNSS gap: the autopilot's heading modelled unaided (its rates' bias 1-sigma %s deg/s)",
             [round(math.degrees(math.sqrt(v + floor)), 4) for v in var],
         )
+
+    def _grow_heading(self, var_rad2: float) -> None:
+        """A heading-error variance ``var_rad2`` the gap's departure adds, as an error
+        present since the gap's start (:func:`.unaided.heading_sensitivity`): on the
+        heading, and on the velocity and position it has turned since."""
+        if var_rad2 <= 0.0:
+            return
+        t0, pos0, vel0 = self._unaided_origin
+        mech = self._mech
+        dt = mech.t_s - t0
+        dv = (mech.vel[0] - vel0[0], mech.vel[1] - vel0[1])
+        dq = (mech.pos[0] - pos0[0] - vel0[0] * dt, mech.pos[1] - pos0[1] - vel0[1] * dt)
+        g = np.zeros(self._p.shape[0])
+        g[[ins.IP, ins.IP + 1, ins.IV, ins.IV + 1]] = heading_sensitivity(dv, dq)
+        g[ins.IA + 2] = 1.0
+        self._p += var_rad2 * np.outer(g, g)
 
     def _leave_unaided(self) -> None:
         if not self._unaided_on:
@@ -452,9 +471,7 @@ class BlendNavigator:
         self._imu_covers = dq_imu is not None
         if self._unaided_on and self._departure_on_imu:
             # its heading's departure from its rates: a correction of unknown quality
-            self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_increment(
-                sample.t_s, self._att_q, dq_imu
-            )
+            self._grow_heading(self.departure.on_increment(sample.t_s, self._att_q, dq_imu))
         if not self.attitude_held:
             if yaw_correction_rad != self._rate_drift_yaw_corr:
                 self._rate_drift_yaw_corr = yaw_correction_rad
@@ -464,9 +481,7 @@ class BlendNavigator:
         if len(rates) == 3 and math.isfinite(sum(rates)):
             self._last_rates_b = rates
             if self._unaided_on and not self._departure_on_imu:
-                self._p[ins.IA + 2, ins.IA + 2] += self.departure.on_sample(
-                    sample.t_s, self._att_q, rates
-                )
+                self._grow_heading(self.departure.on_sample(sample.t_s, self._att_q, rates))
             if not self.attitude_held:
                 self.rate_drift.on_sample(sample.t_s, self._att_q, rates)
             elif self._strapdown and not self._own_attitude:
