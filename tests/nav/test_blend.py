@@ -640,3 +640,43 @@ def test_a_hold_begun_in_a_rotation_claims_the_attitude_error_it_leaves(
     )
     w_n = c_nb @ np.array(rate_b_radps)
     np.testing.assert_allclose(with_lag - without, lag_s**2 * np.outer(w_n, w_n), atol=1e-12)
+
+
+def test_a_turn_entered_in_the_hold_counts_its_lag_about_down() -> None:
+    """While the rates carry the attitude, a rotation about down that changes (a turn
+    entered in the gap) adds ``held_rates_lag_s`` times the largest change so far, as
+    heading variance, as it grows; a roll (about a horizontal axis) and a return to the
+    hold's rotation add nothing."""
+    spec = SimSpec(duration_s=20.0)
+    sim = simulate(spec, 5)
+    lag_s = 0.03
+    nav = BlendNavigator(
+        config_for(spec, mode="attitude_aided", adaptive=False, held_rates_lag_s=lag_s), FRAME
+    )
+    last: AttitudeSample | None = None
+    for s in sim.samples:
+        if isinstance(s, AttitudeSample):
+            nav.on_attitude(s, 0.0)
+            last = s
+        elif isinstance(s, ImuSample):
+            nav.on_imu(s)
+        else:
+            nav.on_gnss(s)
+    assert last is not None and nav.initialised
+    level = AttitudeSample(last.t_s, last.t_rx_s, 0.0, 0.0, last.yaw_rad, np.zeros(3))
+    nav.on_attitude(level, 0.0)
+    nav.hold_attitude(True)
+
+    def heading_var_after(t_s: float, rates: tuple[float, float, float]) -> float:
+        nav.on_attitude(AttitudeSample(t_s, t_s, 0.0, 0.0, last.yaw_rad, np.array(rates)), 0.0)
+        return float(nav.covariance[8, 8])
+
+    start = float(nav.covariance[8, 8])
+    after_roll = heading_var_after(last.t_s + 0.04, (0.5, 0.0, 0.0))
+    assert after_roll == pytest.approx(start, abs=1e-9)  # the process noise of 40 ms only
+    after_turn = heading_var_after(last.t_s + 0.08, (0.0, 0.0, 0.3))
+    assert after_turn - after_roll == pytest.approx(lag_s**2 * 0.3**2, abs=1e-9)
+    after_faster = heading_var_after(last.t_s + 0.12, (0.0, 0.0, 0.4))
+    assert after_faster - after_turn == pytest.approx(lag_s**2 * (0.4**2 - 0.3**2), abs=1e-9)
+    back = heading_var_after(last.t_s + 0.16, (0.0, 0.0, 0.0))
+    assert back == pytest.approx(after_faster, abs=1e-9)

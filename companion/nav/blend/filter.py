@@ -129,6 +129,10 @@ class BlendNavigator:
         """The IMU's gyro carried the attitude's last step (:meth:`GyroCarry.take`)."""
         self._departure_on_imu = False
         """The gap's departure is carried by the IMU's gyro (else by the attitude's rates)."""
+        self._held_w0_n: FloatArray | None = None
+        """The rotation (nav frame, rad/s) when the rates began carrying the attitude."""
+        self._held_peak_sq = 0.0
+        """Largest squared change of that rotation since, (rad/s)^2."""
         self._unaided_origin: tuple[float, list[float], list[float]] = (0.0, [0.0] * 3, [0.0] * 3)
         """IMU time, position and velocity (NED) where the unaided heading began."""
         self.reset()
@@ -347,9 +351,12 @@ class BlendNavigator:
             lag_s = self.config.held_rates_lag_s
             if not abs(mech.t_s - self._att_t_s) <= self._max_imu_gap_s:
                 w = None  # no recent attitude: its rotation now is unknown
+            self._held_w0_n = None
+            self._held_peak_sq = 0.0
             if w is not None and lag_s > 0.0:
                 w_n = quat_to_mat(mech.q_nb) @ np.array(w)
                 p[6:9, 6:9] += lag_s**2 * np.outer(w_n, w_n)
+                self._held_w0_n = w_n
             log.info(
                 "autopilot attitude held out: its body rates carry ours (their bias 1-sigma "
                 "%s deg/s; started turning at %s deg/s)",
@@ -368,6 +375,23 @@ class BlendNavigator:
             p[:, 12:15] = 0.0
             p[12:15, 12:15] = np.eye(3) * self.config.gyro_bias_sigma_radps**2
             log.info("autopilot attitude taken again")
+
+    def _held_rotation_changed(self, rates_b: list[float]) -> None:
+        """While the rates carry the attitude: the carry lags the rotation by
+        ``held_rates_lag_s``, so its error is that lag times the change of the rotation
+        since the hold began (nav frame), present while the rotation differs (a turn
+        entered in the gap) and turning the velocity meanwhile. Its largest square so far,
+        along the change, is counted as attitude-error variance as it grows (the hold's
+        start counts the rotation then)."""
+        lag_s = self.config.held_rates_lag_s
+        if not self._init or lag_s <= 0.0:
+            return
+        w_n = quat_to_mat(self._mech.q_nb) @ np.array(rates_b)
+        d = w_n[2] - (self._held_w0_n[2] if self._held_w0_n is not None else 0.0)
+        sq = d * d
+        if sq > self._held_peak_sq:
+            self._p[8, 8] += lag_s**2 * (sq - self._held_peak_sq)
+            self._held_peak_sq = sq
 
     def attitude_unaided(self, unaided: bool, *, tilt: bool = False) -> None:
         """``unaided``: a GNSS gap the autopilot shares (its GNSS is ours). Its attitude,
@@ -491,6 +515,7 @@ class BlendNavigator:
                 held.append((sample.t_s, rates))
                 if len(held) > 2:
                     del held[0]
+                self._held_rotation_changed(rates)
         if self._init and not self._strapdown:
             mech = self._mech
             q_used = quat_mul(self._att_corr, self._att_q)
