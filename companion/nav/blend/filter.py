@@ -331,6 +331,8 @@ class BlendNavigator:
             self._leave_unaided()
         self._strapdown = hold
         self._model.set_strapdown(hold)
+        self._held_w0_n = None  # a hold starts its rotation's record afresh
+        self._held_peak_sq = 0.0
         if not self._init:
             return
         p = self._p
@@ -351,8 +353,6 @@ class BlendNavigator:
             lag_s = self.config.held_rates_lag_s
             if not abs(mech.t_s - self._att_t_s) <= self._max_imu_gap_s:
                 w = None  # no recent attitude: its rotation now is unknown
-            self._held_w0_n = None
-            self._held_peak_sq = 0.0
             if w is not None and lag_s > 0.0:
                 w_n = quat_to_mat(mech.q_nb) @ np.array(w)
                 p[6:9, 6:9] += lag_s**2 * np.outer(w_n, w_n)
