@@ -588,6 +588,27 @@ def test_held_attitude_bridges_on_the_rates_with_an_honest_covariance() -> None:
     assert taken_err > 20.0 * held_err
 
 
+def _flown_with_held_lag(
+    spec: SimSpec, sim: SimRun, lag_s: float
+) -> tuple[BlendNavigator, AttitudeSample]:
+    """The blend (attitude-aided, ``held_rates_lag_s`` = ``lag_s``) flown through ``sim``,
+    and the last attitude sample."""
+    nav = BlendNavigator(
+        config_for(spec, mode="attitude_aided", adaptive=False, held_rates_lag_s=lag_s), FRAME
+    )
+    last: AttitudeSample | None = None
+    for s in sim.samples:
+        if isinstance(s, AttitudeSample):
+            nav.on_attitude(s, 0.0)
+            last = s
+        elif isinstance(s, ImuSample):
+            nav.on_imu(s)
+        else:
+            nav.on_gnss(s)
+    assert last is not None and nav.initialised
+    return nav, last
+
+
 @pytest.mark.parametrize("rate_b_radps", [(0.2, -0.1, 0.3), (0.0, 0.0, 0.0)])
 def test_a_hold_begun_in_a_rotation_claims_the_attitude_error_it_leaves(
     rate_b_radps: tuple[float, float, float],
@@ -600,19 +621,7 @@ def test_a_hold_begun_in_a_rotation_claims_the_attitude_error_it_leaves(
     lag_s = 0.03
 
     def held_attitude_cov(lag: float) -> tuple[np.ndarray, np.ndarray]:
-        nav = BlendNavigator(
-            config_for(spec, mode="attitude_aided", adaptive=False, held_rates_lag_s=lag), FRAME
-        )
-        last: AttitudeSample | None = None
-        for s in sim.samples:
-            if isinstance(s, AttitudeSample):
-                nav.on_attitude(s, 0.0)
-                last = s
-            elif isinstance(s, ImuSample):
-                nav.on_imu(s)
-            else:
-                nav.on_gnss(s)
-        assert last is not None and nav.initialised
+        nav, last = _flown_with_held_lag(spec, sim, lag)
         # the autopilot's last attitude sample, reporting the rotation under way
         nav.on_attitude(
             AttitudeSample(
@@ -650,19 +659,7 @@ def test_a_turn_entered_in_the_hold_counts_its_lag_about_down() -> None:
     spec = SimSpec(duration_s=20.0)
     sim = simulate(spec, 5)
     lag_s = 0.03
-    nav = BlendNavigator(
-        config_for(spec, mode="attitude_aided", adaptive=False, held_rates_lag_s=lag_s), FRAME
-    )
-    last: AttitudeSample | None = None
-    for s in sim.samples:
-        if isinstance(s, AttitudeSample):
-            nav.on_attitude(s, 0.0)
-            last = s
-        elif isinstance(s, ImuSample):
-            nav.on_imu(s)
-        else:
-            nav.on_gnss(s)
-    assert last is not None and nav.initialised
+    nav, last = _flown_with_held_lag(spec, sim, lag_s)
     level = AttitudeSample(last.t_s, last.t_rx_s, 0.0, 0.0, last.yaw_rad, np.zeros(3))
     nav.on_attitude(level, 0.0)
     nav.hold_attitude(True)
